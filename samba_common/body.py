@@ -1,0 +1,125 @@
+"""The kinematic body model: 13 joints from a torso frame, bone directions and bone lengths.
+
+This is the joint-angle representation used by the motion database, the pseudo-poses and the
+solver. A pose is
+
+- a **torso frame**: origin at the shoulder midpoint (world metres) and a rotation ``R`` (3, 3)
+  whose columns are the torso axes in world coordinates: x from the right to the left
+  shoulder, y up the spine (from the hip midpoint to the shoulder midpoint, made orthogonal to
+  x), z = x × y (forward);
+- 11 unit **bone directions** in that torso frame, in ``BONE_DIRS`` order;
+- 8 **bone lengths** per subject, in ``BONE_TYPES`` order (both sides alike).
+
+Because x and y are fixed by the shoulders and the spine, the spine direction has no z
+component and the shoulder directions are ±x: they are not free parameters.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .skeleton import BONE_TYPES, J, N_JOINTS
+
+BONE_DIRS: tuple[str, ...] = (
+    "neck",          # shoulder midpoint -> head
+    "pelvis",        # right hip -> left hip
+    "spine",         # shoulder midpoint -> hip midpoint
+    "left_upper_arm", "right_upper_arm",
+    "left_forearm", "right_forearm",
+    "left_thigh", "right_thigh",
+    "left_shin", "right_shin",
+)
+D = {name: i for i, name in enumerate(BONE_DIRS)}
+L = {name: i for i, name in enumerate(BONE_TYPES)}
+
+#: limb chains (side, upper bone, lower bone, root joint, middle joint, end joint, upper length, lower length)
+LIMBS = (
+    ("left", "left_upper_arm", "left_forearm", "left_shoulder", "left_elbow", "left_wrist", "upper_arm", "forearm"),
+    ("right", "right_upper_arm", "right_forearm", "right_shoulder", "right_elbow", "right_wrist", "upper_arm", "forearm"),
+    ("left", "left_thigh", "left_shin", "left_hip", "left_knee", "left_ankle", "thigh", "shin"),
+    ("right", "right_thigh", "right_shin", "right_hip", "right_knee", "right_ankle", "thigh", "shin"),
+)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 1e-12, n, 1.0)
+
+
+def torso_frames(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Torso frames of (F, 13, 3) joints -> origin (F, 3) metres, R (F, 3, 3) (columns = axes)."""
+    ls, rs = joints[:, J["left_shoulder"]], joints[:, J["right_shoulder"]]
+    origin = 0.5 * (ls + rs)
+    hipmid = 0.5 * (joints[:, J["left_hip"]] + joints[:, J["right_hip"]])
+    x = _unit(ls - rs)
+    up = origin - hipmid
+    y = _unit(up - np.sum(up * x, axis=-1, keepdims=True) * x)
+    z = np.cross(x, y)
+    return origin, np.stack([x, y, z], axis=-1)
+
+
+def bone_lengths(joints: np.ndarray) -> np.ndarray:
+    """Per-frame bone lengths (F, 8) in metres, BONE_TYPES order, both sides averaged."""
+    j = joints
+    sm = 0.5 * (j[:, J["left_shoulder"]] + j[:, J["right_shoulder"]])
+    hm = 0.5 * (j[:, J["left_hip"]] + j[:, J["right_hip"]])
+
+    def dist(a, b):
+        return np.linalg.norm(a - b, axis=-1)
+
+    def pair(a, b):
+        return 0.5 * (dist(j[:, J[f"left_{a}"]], j[:, J[f"left_{b}"]]) + dist(j[:, J[f"right_{a}"]], j[:, J[f"right_{b}"]]))
+
+    return np.stack([
+        dist(j[:, J["left_shoulder"]], j[:, J["right_shoulder"]]),
+        dist(j[:, J["left_hip"]], j[:, J["right_hip"]]),
+        dist(sm, hm),
+        dist(sm, j[:, J["head"]]),
+        pair("shoulder", "elbow"),
+        pair("elbow", "wrist"),
+        pair("hip", "knee"),
+        pair("knee", "ankle"),
+    ], axis=-1)
+
+
+def decompose(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(F, 13, 3) joints -> origin (F, 3), R (F, 3, 3), dirs (F, 11, 3) unit vectors in the torso frame."""
+    origin, R = torso_frames(joints)
+    j = joints
+    sm = origin
+    hm = 0.5 * (j[:, J["left_hip"]] + j[:, J["right_hip"]])
+    world = np.empty((len(j), len(BONE_DIRS), 3))
+    world[:, D["neck"]] = j[:, J["head"]] - sm
+    world[:, D["pelvis"]] = j[:, J["left_hip"]] - j[:, J["right_hip"]]
+    world[:, D["spine"]] = hm - sm
+    for _side, upper, lower, a, b, c, _lu, _ll in LIMBS:
+        world[:, D[upper]] = j[:, J[b]] - j[:, J[a]]
+        world[:, D[lower]] = j[:, J[c]] - j[:, J[b]]
+    dirs = _unit(np.einsum("fbi,fij->fbj", world, R))
+    return origin, R, dirs
+
+
+def fk_body(dirs: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """Joints in the torso frame: dirs (..., 11, 3), lengths (8,) or (..., 8) -> (..., 13, 3)."""
+    lengths = np.asarray(lengths, dtype=float)
+    shape = dirs.shape[:-2]
+    lens = np.broadcast_to(lengths, shape + (len(BONE_TYPES),))
+    out = np.zeros(shape + (N_JOINTS, 3))
+    half_sw = 0.5 * lens[..., L["shoulder_width"]]
+    out[..., J["left_shoulder"], 0] = half_sw
+    out[..., J["right_shoulder"], 0] = -half_sw
+    out[..., J["head"], :] = lens[..., L["neck"], None] * dirs[..., D["neck"], :]
+    hm = lens[..., L["torso"], None] * dirs[..., D["spine"], :]
+    half_pelvis = 0.5 * lens[..., L["hip_width"], None] * dirs[..., D["pelvis"], :]
+    out[..., J["left_hip"], :] = hm + half_pelvis
+    out[..., J["right_hip"], :] = hm - half_pelvis
+    for _side, upper, lower, a, b, c, lu, ll in LIMBS:
+        out[..., J[b], :] = out[..., J[a], :] + lens[..., L[lu], None] * dirs[..., D[upper], :]
+        out[..., J[c], :] = out[..., J[b], :] + lens[..., L[ll], None] * dirs[..., D[lower], :]
+    return out
+
+
+def fk(origin: np.ndarray, R: np.ndarray, dirs: np.ndarray, lengths: np.ndarray) -> np.ndarray:
+    """World joints (..., 13, 3) from origin (..., 3), R (..., 3, 3), dirs (..., 11, 3), lengths (8,)."""
+    body = fk_body(dirs, lengths)
+    return origin[..., None, :] + np.einsum("...ij,...pj->...pi", R, body)

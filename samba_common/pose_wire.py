@@ -1,0 +1,178 @@
+"""Pose wire format: what the server publishes on ``samba/{session}/pose`` (binary) and
+``samba/{session}/pose/json`` (JSON), and records on the ``/pose`` MCAP channel.
+
+Binary, version 1, little endian::
+
+    header "<4sBBHIqffBBH" (32 bytes)
+        magic       4s  b"SMBP"
+        version     B   1
+        flags       B   FLAG_* bit set
+        n_joints    H   13 (JOINT_NAMES order)
+        seq         I   pose counter (wraps at 2**32)
+        t_ns        q   frame capture time, ns since the Unix epoch, server clock
+        latency_ms  f   capture -> publish on the server, milliseconds
+        residual_m  f   solver residual, metres (NaN when unsolved)
+        n_markers   B   markers used by the solver (triangulated this frame)
+        n_views     B   motes that contributed a packet to the frame
+        marker_mask H   bit i set = marker i (MARKER_NAMES order) triangulated
+    joints   n_joints x 3 float32, world metres Z up; NaN when unsolved
+    markers  8 x 3 float32 triangulated markers (NaN = missing), only if FLAG_MARKERS
+
+JSON variant (UTF-8, one object; NaN becomes ``null``)::
+
+    {"type": "samba.pose", "version": 1, "seq": 12, "t_ns": 1700000000123456789,
+     "t": 1700000000.1234568, "latency_ms": 2.1, "residual_m": 0.004, "n_markers": 8,
+     "n_views": 4, "marker_mask": 255, "flags": ["solved"], "joint_names": [...13 names...],
+     "joints": [[x, y, z], ...13 rows..., or null rows], "markers": [[x, y, z] | null, ...8]}
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .skeleton import JOINT_NAMES, N_JOINTS, N_MARKERS
+
+MAGIC = b"SMBP"
+VERSION = 1
+HEADER = struct.Struct("<4sBBHIqffBBH")
+
+FLAG_SOLVED = 0x01  #: joints hold a solution
+FLAG_MARKERS = 0x02  #: the triangulated markers follow the joints
+FLAG_INCOMPLETE = 0x04  #: at least one live mote had no packet in this frame
+FLAG_SWAP_REPAIRED = 0x08  #: a label swap of one mote was detected and repaired
+FLAG_NAMES = {FLAG_SOLVED: "solved", FLAG_MARKERS: "markers", FLAG_INCOMPLETE: "incomplete",
+              FLAG_SWAP_REPAIRED: "swap_repaired"}
+
+
+class PoseError(ValueError):
+    """A buffer is not a valid pose message."""
+
+
+@dataclass
+class PoseMessage:
+    """One published pose.
+
+    joints: (13, 3) float world metres (NaN rows when unsolved); markers: (8, 3) float or None.
+    """
+
+    seq: int
+    t_ns: int
+    joints: np.ndarray
+    latency_ms: float = 0.0
+    residual_m: float = float("nan")
+    n_markers: int = 0
+    n_views: int = 0
+    flags: int = 0
+    markers: np.ndarray | None = None
+    marker_mask: int = 0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def solved(self) -> bool:
+        return bool(self.flags & FLAG_SOLVED)
+
+
+def encode_pose(m: PoseMessage) -> bytes:
+    """Binary encoding of ``m``; raise PoseError when a field does not fit."""
+    joints = np.asarray(m.joints, dtype="<f4")
+    if joints.shape != (N_JOINTS, 3):
+        raise PoseError(f"joints must be ({N_JOINTS}, 3), got {joints.shape}")
+    flags = m.flags & ~FLAG_MARKERS
+    tail = b""
+    if m.markers is not None:
+        markers = np.asarray(m.markers, dtype="<f4")
+        if markers.shape != (N_MARKERS, 3):
+            raise PoseError(f"markers must be ({N_MARKERS}, 3), got {markers.shape}")
+        flags |= FLAG_MARKERS
+        tail = markers.tobytes()
+    try:
+        head = HEADER.pack(MAGIC, VERSION, flags, N_JOINTS, m.seq & 0xFFFFFFFF, int(m.t_ns),
+                           float(m.latency_ms), float(m.residual_m), min(int(m.n_markers), 255),
+                           min(int(m.n_views), 255), int(m.marker_mask) & 0xFFFF)
+    except struct.error as exc:
+        raise PoseError(f"pose field out of range: {exc}") from None
+    return head + joints.tobytes() + tail
+
+
+def decode_pose(buf: bytes | bytearray | memoryview) -> PoseMessage:
+    """Parse a binary pose; raise PoseError on truncated or foreign input."""
+    buf = bytes(buf)
+    if len(buf) < HEADER.size:
+        raise PoseError(f"truncated pose: {len(buf)} bytes < header {HEADER.size}")
+    magic, ver, flags, nj, seq, t_ns, lat, res, nm, nv, mask = HEADER.unpack_from(buf)
+    if magic != MAGIC:
+        raise PoseError(f"bad magic {magic!r} (expected {MAGIC!r})")
+    if ver != VERSION:
+        raise PoseError(f"unsupported pose version {ver} (this build reads {VERSION})")
+    if nj != N_JOINTS:
+        raise PoseError(f"pose has {nj} joints, expected {N_JOINTS}")
+    expected = HEADER.size + nj * 12 + (N_MARKERS * 12 if flags & FLAG_MARKERS else 0)
+    if len(buf) != expected:
+        raise PoseError(f"pose is {len(buf)} bytes, header says {expected}")
+    joints = np.frombuffer(buf, "<f4", count=nj * 3, offset=HEADER.size).reshape(nj, 3).astype(np.float64)
+    markers = None
+    if flags & FLAG_MARKERS:
+        markers = np.frombuffer(buf, "<f4", count=N_MARKERS * 3, offset=HEADER.size + nj * 12)
+        markers = markers.reshape(N_MARKERS, 3).astype(np.float64)
+    return PoseMessage(seq, t_ns, joints, lat, res, nm, nv, flags, markers, mask)
+
+
+def _rows(a: np.ndarray | None) -> list | None:
+    if a is None:
+        return None
+    return [None if not np.all(np.isfinite(r)) else [round(float(x), 6) for x in r] for r in np.asarray(a)]
+
+
+def _num(x: float, nd: int) -> float | None:
+    return None if not math.isfinite(x) else round(float(x), nd)
+
+
+def pose_to_json(m: PoseMessage) -> bytes:
+    """The documented JSON variant of ``m`` (see the module docstring)."""
+    d = {
+        "type": "samba.pose", "version": VERSION, "seq": int(m.seq), "t_ns": int(m.t_ns),
+        "t": m.t_ns / 1e9, "latency_ms": _num(m.latency_ms, 3), "residual_m": _num(m.residual_m, 6),
+        "n_markers": int(m.n_markers), "n_views": int(m.n_views), "marker_mask": int(m.marker_mask),
+        "flags": [name for bit, name in FLAG_NAMES.items() if m.flags & bit and bit != FLAG_MARKERS],
+        "joint_names": list(JOINT_NAMES), "joints": _rows(m.joints), "markers": _rows(m.markers),
+    }
+    return json.dumps(d, separators=(",", ":"), allow_nan=False).encode("utf-8")
+
+
+def pose_from_json(buf: bytes | str) -> PoseMessage:
+    """Parse the JSON variant; raise PoseError when it is not one."""
+    try:
+        d = json.loads(buf)
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise PoseError(f"pose JSON unreadable: {exc}") from None
+    if not isinstance(d, dict) or d.get("type") != "samba.pose":
+        raise PoseError("not a samba.pose message")
+
+    def arr(rows, n):
+        out = np.full((n, 3), np.nan)
+        for i, r in enumerate(rows[:n]):
+            if r is not None:
+                out[i] = r
+        return out
+
+    try:
+        names = {v: k for k, v in FLAG_NAMES.items()}
+        flags = 0
+        for f in d.get("flags", []):
+            flags |= names.get(f, 0)
+        markers = None if d.get("markers") is None else arr(d["markers"], N_MARKERS)
+        if markers is not None:
+            flags |= FLAG_MARKERS
+        nan = float("nan")
+        return PoseMessage(int(d["seq"]), int(d["t_ns"]), arr(d["joints"], N_JOINTS),
+                           nan if d.get("latency_ms") is None else float(d["latency_ms"]),
+                           nan if d.get("residual_m") is None else float(d["residual_m"]),
+                           int(d.get("n_markers", 0)), int(d.get("n_views", 0)), flags, markers,
+                           int(d.get("marker_mask", 0)))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise PoseError(f"pose JSON malformed: {exc}") from None

@@ -1,0 +1,203 @@
+"""Blob detection on 8-bit grey frames: threshold, contours, filters, grey-weighted centroids.
+
+Pipeline per frame (``Detector.detect``):
+
+1. threshold: fixed, or automatic (background median + noise MAD from a sub-sampled frame
+   and the frame maximum, refreshed every ``auto_every`` frames);
+2. ``cv2.findContours`` on the binary image (external contours = connected blobs);
+3. filters: pixel count in ``[min_area, max_area]`` (specks, large reflections), bounding box
+   aspect ratio <= ``max_aspect`` and fill ratio >= ``min_fill`` (streaks, rings);
+4. intensity-weighted centroid in a padded ROI around each blob, weights = grey level minus a
+   floor (background + ``floor_sigmas`` x noise), which removes the ~0.2 px bias of binary
+   centroids;
+5. static distractor mask: blobs that sit still (within ``static_radius`` px) for
+   ``static_frames`` frames in a row are remembered as distractors (lamps, reflections) and
+   dropped until they disappear for ``static_forget`` frames.
+
+Pixel coordinates: origin at the centre of the top-left pixel, u right, v down.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DetectConfig:
+    """Detection settings (``[detect]`` in configs/mote.toml)."""
+
+    threshold_mode: str = "auto"  #: "auto" or "fixed"
+    threshold: int = 128  #: fixed threshold (grey level), also the start value in auto mode
+    auto_sigmas: float = 8.0  #: auto: at least background + this many noise sigmas
+    auto_fraction: float = 0.35  #: auto: at least background + this fraction of (max - background)
+    auto_min: int = 30
+    auto_max: int = 230
+    auto_every: int = 15  #: auto: refresh the statistics every this many frames
+    min_area: int = 2  #: pixels above threshold
+    max_area: int = 600
+    max_aspect: float = 3.5  #: bounding-box long side / short side
+    min_fill: float = 0.25  #: pixels above threshold / bounding-box area
+    pad: int = 2  #: ROI padding around the blob for the weighted centroid (px)
+    floor_sigmas: float = 2.0  #: weight floor above background, in noise sigmas
+    max_blobs: int = 64  #: keep at most this many (largest) blobs
+    static_mask: bool = True
+    static_frames: int = 600  #: frames a blob must stay still to become a distractor
+    static_radius: float = 0.35  #: px
+    static_forget: int = 30  #: frames a distractor may be absent before it is forgotten
+
+    def __post_init__(self) -> None:
+        if self.threshold_mode not in ("auto", "fixed"):
+            raise ValueError(f"threshold_mode must be 'auto' or 'fixed', got {self.threshold_mode!r}")
+        if not 1 <= self.threshold <= 254:
+            raise ValueError(f"threshold must be 1..254, got {self.threshold}")
+        if self.min_area < 1 or self.max_area < self.min_area:
+            raise ValueError("need 1 <= min_area <= max_area")
+
+
+@dataclass
+class Detections:
+    """Blobs of one frame. uv: (N, 2) float32 px; area: (N,) int32 px above threshold;
+    size: (N, 2) int32 bounding box (w, h); peak: (N,) uint8 max grey level."""
+
+    uv: np.ndarray
+    area: np.ndarray
+    size: np.ndarray
+    peak: np.ndarray
+    threshold: int
+
+    def __len__(self) -> int:
+        return len(self.uv)
+
+    @classmethod
+    def empty(cls, threshold: int) -> "Detections":
+        return cls(np.zeros((0, 2), np.float32), np.zeros(0, np.int32), np.zeros((0, 2), np.int32),
+                   np.zeros(0, np.uint8), threshold)
+
+
+class StaticMask:
+    """Learns blobs that never move and masks them. Positions in px."""
+
+    def __init__(self, frames: int, radius: float, forget: int) -> None:
+        self.frames, self.radius, self.forget = frames, radius, forget
+        self.pos = np.zeros((0, 2))  # candidate positions (running mean)
+        self.count = np.zeros(0, np.int64)  # consecutive frames seen still
+        self.absent = np.zeros(0, np.int64)  # consecutive frames not seen
+
+    @property
+    def static(self) -> np.ndarray:
+        """(K, 2) positions currently masked."""
+        return self.pos[self.count >= self.frames]
+
+    def update(self, uv: np.ndarray) -> np.ndarray:
+        """Feed this frame's blobs (N, 2); returns a (N,) bool keep-mask (False = distractor)."""
+        n = len(uv)
+        keep = np.ones(n, bool)
+        matched = np.zeros(len(self.pos), bool)
+        if len(self.pos) and n:
+            d2 = ((uv[:, None, :] - self.pos[None, :, :]) ** 2).sum(-1)
+            j = d2.argmin(1)
+            close = d2[np.arange(n), j] <= self.radius ** 2
+            for i in np.flatnonzero(close):
+                k = j[i]
+                if matched[k]:
+                    continue
+                matched[k] = True
+                if self.count[k] >= self.frames:
+                    keep[i] = False
+                else:
+                    c = self.count[k]
+                    self.pos[k] = (self.pos[k] * min(c, 50) + uv[i]) / (min(c, 50) + 1)
+                self.count[k] += 1
+            new = ~close
+        else:
+            new = np.ones(n, bool)
+        self.absent[matched] = 0
+        self.absent[~matched] += 1
+        # a still-learning candidate that was missed or moved starts over; a learnt one is
+        # forgotten only after `forget` absent frames
+        learnt = self.count >= self.frames
+        alive = np.where(learnt, self.absent <= self.forget, matched)
+        self.pos, self.count, self.absent = self.pos[alive], self.count[alive], self.absent[alive]
+        if new.any():
+            self.pos = np.vstack([self.pos, uv[new]])
+            self.count = np.concatenate([self.count, np.ones(int(new.sum()), np.int64)])
+            self.absent = np.concatenate([self.absent, np.zeros(int(new.sum()), np.int64)])
+        if len(self.pos) > 256:  # bound memory under heavy noise
+            order = np.argsort(-self.count)[:256]
+            self.pos, self.count, self.absent = self.pos[order], self.count[order], self.absent[order]
+        return keep
+
+
+class Detector:
+    """Stateful blob detector (auto threshold statistics, static mask). Not thread-safe."""
+
+    def __init__(self, config: DetectConfig | None = None) -> None:
+        self.cfg = config or DetectConfig()
+        self.threshold = int(self.cfg.threshold)
+        self.background = 0.0
+        self.noise = 2.0
+        self._frame_no = 0
+        self.mask = StaticMask(self.cfg.static_frames, self.cfg.static_radius, self.cfg.static_forget)
+        self.masked = 0  #: blobs dropped by the static mask, total
+
+    def _update_threshold(self, img: np.ndarray) -> None:
+        sub = img[::4, ::4]
+        bg = float(np.median(sub))
+        mad = float(np.median(np.abs(sub.astype(np.int16) - int(bg))))
+        self.background = bg
+        self.noise = max(1.4826 * mad, 0.5)
+        if self.cfg.threshold_mode == "auto":
+            peak = float(img.max())
+            thr = max(bg + self.cfg.auto_sigmas * self.noise, bg + self.cfg.auto_fraction * (peak - bg))
+            self.threshold = int(np.clip(round(thr), self.cfg.auto_min, self.cfg.auto_max))
+
+    def detect(self, img: np.ndarray) -> Detections:
+        """img: (H, W) uint8 grey frame -> Detections (after filters and static mask)."""
+        if img.ndim != 2 or img.dtype != np.uint8:
+            raise ValueError(f"expected a (H, W) uint8 frame, got {img.shape} {img.dtype}")
+        cfg = self.cfg
+        if self._frame_no % cfg.auto_every == 0:
+            self._update_threshold(img)
+        self._frame_no += 1
+        thr = self.threshold
+        _, binary = cv2.threshold(img, thr - 1, 255, cv2.THRESH_BINARY)  # >= thr
+        contours, _ = cv2.findContours(binary, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        if not contours:
+            return Detections.empty(thr)
+        if len(contours) > 4 * cfg.max_blobs:
+            log.debug("%d contours: frame is noisy, keeping the first %d", len(contours), 4 * cfg.max_blobs)
+            contours = contours[: 4 * cfg.max_blobs]
+        h, w = img.shape
+        floor = int(min(self.background + cfg.floor_sigmas * self.noise, thr - 1))
+        pad = cfg.pad
+        rows = []
+        for c in contours:
+            x, y, bw, bh = cv2.boundingRect(c)
+            if bw * bh < cfg.min_area or max(bw, bh) > cfg.max_aspect * min(bw, bh) + 1:
+                continue
+            area = cv2.countNonZero(binary[y:y + bh, x:x + bw])
+            if area < cfg.min_area or area > cfg.max_area or area < cfg.min_fill * bw * bh:
+                continue
+            x0, y0 = max(x - pad, 0), max(y - pad, 0)
+            roi = img[y0:min(y + bh + pad, h), x0:min(x + bw + pad, w)]
+            m = cv2.moments(cv2.subtract(roi, floor))
+            if m["m00"] <= 0:
+                continue
+            rows.append((x0 + m["m10"] / m["m00"], y0 + m["m01"] / m["m00"], area, bw, bh, int(roi.max())))
+        if not rows:
+            return Detections.empty(thr)
+        a = np.asarray(rows, dtype=np.float64)
+        if len(a) > cfg.max_blobs:
+            a = a[np.argsort(-a[:, 2])[: cfg.max_blobs]]
+        if cfg.static_mask:
+            keep = self.mask.update(a[:, :2])
+            self.masked += int((~keep).sum())
+            a = a[keep]
+        return Detections(a[:, :2].astype(np.float32), a[:, 2].astype(np.int32), a[:, 3:5].astype(np.int32),
+                          a[:, 5].astype(np.uint8), thr)

@@ -1,0 +1,215 @@
+"""Group free-running motes' packets into frames by capture time (pure logic, no I/O).
+
+Each mote stamps its packets with its own clock (``t_ns``); the server stamps them on
+arrival (``arrival_ns``). The delay ``d = arrival_ns - t_ns`` is the mote's clock offset plus
+the transport latency, which is never below some floor. A sliding-window **minimum** of ``d``
+per mote (the one-way "minimum delay" filter of NTP) therefore estimates the offset up to a
+constant common to all motes; jitter only ever adds to ``d``, so the minimum is immune to it.
+Corrected capture times ``t_ns + min d`` of all motes are on the server's clock and directly
+comparable.
+
+Packets join the pending frame whose anchor (first packet's corrected time) is within
+``group_tolerance`` frame periods and which has no packet from that mote yet. A frame is
+emitted when every live mote has contributed, or at its deadline (arrival clock):
+``anchor + tolerance + max_wait``. A mote silent for ``dead_after_ms`` or reported gone is
+not waited for, so a dead mote never stalls the stream. Packets for frames already emitted
+are counted as late and dropped. All decisions depend only on the sequence of
+(packet, arrival time) inputs, so a replay of the same inputs gives the same frames.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SyncConfig:
+    """Frame grouping parameters (``[sync]`` in configs/server.toml)."""
+
+    fps: float = 60.0  #: nominal mote frame rate, sets the grouping tolerance
+    group_tolerance: float = 0.5  #: frame periods within which packets join one frame
+    max_wait_ms: float = 12.0  #: extra wait for late/jittered packets after the frame's window
+    offset_window_s: float = 4.0  #: sliding window of the per-mote minimum-delay filter
+    dead_after_ms: float = 250.0  #: a mote silent this long is not waited for
+    restart_seq_gap: int = 1000  #: a backwards seq jump larger than this = mote restarted
+
+    def __post_init__(self) -> None:
+        if self.fps <= 0 or not 0 < self.group_tolerance <= 1 or self.max_wait_ms < 0:
+            raise ValueError(f"invalid sync config {self}")
+
+    @property
+    def period_ns(self) -> int:
+        return int(round(1e9 / self.fps))
+
+
+@dataclass
+class SyncPacket:
+    """One packet entering the synchroniser; ``payload`` is passed through untouched."""
+
+    mote_id: str
+    seq: int
+    t_ns: int
+    arrival_ns: int
+    payload: Any = None
+    tc_ns: int = 0  #: corrected capture time (server clock), set by the synchroniser
+
+
+@dataclass
+class Frame:
+    """Packets of one capture instant: ``packets`` by mote id; ``t_ns`` mean corrected time."""
+
+    t_ns: int
+    packets: dict[str, SyncPacket]
+    complete: bool
+    missing: tuple[str, ...] = ()
+
+
+@dataclass
+class MoteSyncStats:
+    """Per-mote counters."""
+
+    received: int = 0
+    late: int = 0
+    duplicate: int = 0
+    restarts: int = 0
+    offset_ns: int = 0
+    last_arrival_ns: int = 0
+
+
+@dataclass
+class _Pending:
+    anchor: int
+    packets: dict[str, SyncPacket] = field(default_factory=dict)
+
+
+class _MinDelay:
+    """Sliding-window minimum of (arrival - capture) over the last ``window_ns``."""
+
+    def __init__(self, window_ns: int):
+        self.window_ns = window_ns
+        self.q: deque[tuple[int, int]] = deque()  # (arrival, delay), delays increasing
+
+    def add(self, arrival: int, delay: int) -> int:
+        while self.q and self.q[-1][1] >= delay:
+            self.q.pop()
+        self.q.append((arrival, delay))
+        while self.q[0][0] < arrival - self.window_ns:
+            self.q.popleft()
+        return self.q[0][1]
+
+
+class FrameSync:
+    """Turn a stream of packets from several motes into frames (see the module docstring)."""
+
+    def __init__(self, config: SyncConfig | None = None):
+        self.config = config or SyncConfig()
+        c = self.config
+        self._tol = int(c.group_tolerance * c.period_ns)
+        self._wait = int(c.max_wait_ms * 1e6)
+        self._dead = int(c.dead_after_ms * 1e6)
+        self._pending: list[_Pending] = []
+        self._delay: dict[str, _MinDelay] = {}
+        self._last_seq: dict[str, int] = {}
+        self._gone: set[str] = set()
+        self.motes: dict[str, MoteSyncStats] = {}
+        self.now_ns = 0
+        self.last_anchor: int | None = None
+        self._last_t = -(2**62)
+        self.frames_emitted = 0
+        self.frames_incomplete = 0
+
+    # ------------------------------------------------------------------ inputs
+    def mote_joined(self, mote_id: str) -> None:
+        """A mote (re)appeared: forget its clock estimate (it may have restarted)."""
+        self._gone.discard(mote_id)
+        self._delay.pop(mote_id, None)
+        self._last_seq.pop(mote_id, None)
+
+    def mote_left(self, mote_id: str) -> list[Frame]:
+        """A mote is gone: stop waiting for it; returns frames that became complete."""
+        self._gone.add(mote_id)
+        return self._emit_ready()
+
+    def push(self, p: SyncPacket) -> list[Frame]:
+        """Add one packet; returns the frames that are ready, oldest first."""
+        out = self.poll(p.arrival_ns)
+        st = self.motes.setdefault(p.mote_id, MoteSyncStats())
+        st.received += 1
+        st.last_arrival_ns = p.arrival_ns
+        self._gone.discard(p.mote_id)
+        last = self._last_seq.get(p.mote_id)
+        if last is not None and p.seq == last:
+            st.duplicate += 1
+            return out
+        if last is not None and p.seq < last - self.config.restart_seq_gap:
+            st.restarts += 1
+            log.info("mote %s restarted (seq %d after %d): clock estimate reset", p.mote_id, p.seq, last)
+            self._delay.pop(p.mote_id, None)
+        self._last_seq[p.mote_id] = p.seq
+        est = self._delay.get(p.mote_id)
+        if est is None:
+            est = self._delay[p.mote_id] = _MinDelay(int(self.config.offset_window_s * 1e9))
+        st.offset_ns = est.add(p.arrival_ns, p.arrival_ns - p.t_ns)
+        p.tc_ns = p.t_ns + st.offset_ns
+        if self.last_anchor is not None and p.tc_ns <= self.last_anchor + self._tol:
+            st.late += 1
+            return out
+        best, best_d = None, None
+        for fr in self._pending:
+            d = abs(fr.anchor - p.tc_ns)
+            if d <= self._tol and p.mote_id not in fr.packets and (best_d is None or d < best_d):
+                best, best_d = fr, d
+        if best is None:
+            best = _Pending(p.tc_ns)
+            i = len(self._pending)
+            while i > 0 and self._pending[i - 1].anchor > best.anchor:
+                i -= 1
+            self._pending.insert(i, best)
+        best.packets[p.mote_id] = p
+        return out + self._emit_ready()
+
+    def poll(self, now_ns: int) -> list[Frame]:
+        """Advance the clock to ``now_ns`` (arrival clock); returns frames now due."""
+        self.now_ns = max(self.now_ns, now_ns)
+        return self._emit_ready()
+
+    def flush(self) -> list[Frame]:
+        """Emit every pending frame (end of stream)."""
+        out = [self._emit(fr) for fr in self._pending]
+        self._pending = []
+        return out
+
+    # ------------------------------------------------------------------ internals
+    def alive(self) -> list[str]:
+        """Motes currently waited for: heard within ``dead_after_ms`` and not reported gone."""
+        return sorted(m for m, st in self.motes.items()
+                      if m not in self._gone and self.now_ns - st.last_arrival_ns <= self._dead)
+
+    def _emit_ready(self) -> list[Frame]:
+        if not self._pending:
+            return []
+        alive = set(self.alive())
+        last_ready = -1
+        for i, fr in enumerate(self._pending):
+            if fr.anchor + self._tol + self._wait <= self.now_ns or alive <= fr.packets.keys():
+                last_ready = i
+        out = [self._emit(fr, alive) for fr in self._pending[:last_ready + 1]]
+        del self._pending[:last_ready + 1]
+        return out
+
+    def _emit(self, fr: _Pending, alive: set[str] | None = None) -> Frame:
+        alive = set(self.alive()) if alive is None else alive
+        missing = tuple(sorted(alive - fr.packets.keys()))
+        t = round(sum(p.tc_ns for p in fr.packets.values()) / len(fr.packets))
+        t = max(t, self._last_t + 1)
+        self._last_t = t
+        self.last_anchor = fr.anchor if self.last_anchor is None else max(self.last_anchor, fr.anchor)
+        self.frames_emitted += 1
+        if missing:
+            self.frames_incomplete += 1
+        return Frame(t, dict(sorted(fr.packets.items())), not missing, missing)
