@@ -123,3 +123,77 @@ def fk(origin: np.ndarray, R: np.ndarray, dirs: np.ndarray, lengths: np.ndarray)
     """World joints (..., 13, 3) from origin (..., 3), R (..., 3, 3), dirs (..., 11, 3), lengths (8,)."""
     body = fk_body(dirs, lengths)
     return origin[..., None, :] + np.einsum("...ij,...pj->...pi", R, body)
+
+
+def standard_dirs() -> np.ndarray:
+    """Bone directions (11, 3) of the standard pose (T-pose) in the torso frame."""
+    d = np.zeros((len(BONE_DIRS), 3))
+    d[D["neck"]] = (0.0, 1.0, 0.0)
+    d[D["pelvis"]] = (1.0, 0.0, 0.0)
+    d[D["spine"]] = (0.0, -1.0, 0.0)
+    for name in ("left_upper_arm", "left_forearm"):
+        d[D[name]] = (1.0, 0.0, 0.0)
+    for name in ("right_upper_arm", "right_forearm"):
+        d[D[name]] = (-1.0, 0.0, 0.0)
+    for name in ("left_thigh", "right_thigh", "left_shin", "right_shin"):
+        d[D[name]] = (0.0, -1.0, 0.0)
+    return d
+
+
+#: torso axes of a subject facing world +Y, Z up (FORMATS.md): left = -X, up = +Z, forward = +Y
+STANDARD_R = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]).T
+
+
+def standard_pose(lengths: np.ndarray, xy: tuple[float, float] = (0.0, 0.0), ankle_height: float = 0.08) -> np.ndarray:
+    """Joints (13, 3) of the standard pose (FORMATS.md) for bone lengths (8,), standing at ``xy``."""
+    lengths = np.asarray(lengths, dtype=float)
+    h = ankle_height + lengths[L["shin"]] + lengths[L["thigh"]] + lengths[L["torso"]]
+    return fk(np.array([xy[0], xy[1], h]), STANDARD_R, standard_dirs(), lengths)
+
+
+def prepend_standard_pose(joints: np.ndarray, fps: float, seconds: float = 1.0, blend: float = 0.5,
+                          lengths: np.ndarray | None = None) -> np.ndarray:
+    """Put ``seconds`` of the standard pose, then a ``blend``-second transition, before a take.
+
+    joints: (F, 13, 3) metres; lengths: bone lengths (8,) of the pose (default: the take's
+    median). The take is re-posed with those lengths (directions and shoulder trajectory kept),
+    so the whole result has one body. Returns (F + n_standard + n_blend, 13, 3).
+    """
+    lens = np.median(bone_lengths(joints), axis=0) if lengths is None else np.asarray(lengths, float)
+    origin, R, dirs = decompose(joints)
+    take = fk(origin, R, dirs, lens)
+    floor = float(np.nanmin(take[..., 2]))
+    stand = standard_pose(lens, (origin[0, 0], origin[0, 1]), ankle_height=max(floor, 0.0) if floor > 0 else 0.08)
+    n_std, n_blend = int(round(seconds * fps)), int(round(blend * fps))
+    s_origin, _s_R, s_dirs = decompose(stand[None])
+    out = [np.repeat(stand[None], n_std, axis=0)]
+    if n_blend:
+        w = (np.arange(1, n_blend + 1) / (n_blend + 1))[:, None]
+        w = 0.5 - 0.5 * np.cos(np.pi * w)  # smooth start and stop
+        o = (1 - w) * s_origin + w * origin[:1]
+        d = (1 - w[:, :, None]) * s_dirs + w[:, :, None] * dirs[:1]
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        rots = _slerp_rot(STANDARD_R, R[0], w[:, 0])
+        out.append(fk(o, rots, d, lens))
+    out.append(take)
+    return np.concatenate(out, axis=0)
+
+
+def _slerp_rot(Ra: np.ndarray, Rb: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Rotations (len(w), 3, 3) interpolated from Ra to Rb at fractions w (n,)."""
+    Rrel = Ra.T @ Rb
+    angle = np.arccos(np.clip((np.trace(Rrel) - 1) / 2, -1.0, 1.0))
+    if angle < 1e-9:
+        return np.repeat(Ra[None], len(w), axis=0)
+    axis = np.array([Rrel[2, 1] - Rrel[1, 2], Rrel[0, 2] - Rrel[2, 0], Rrel[1, 0] - Rrel[0, 1]])
+    n = np.linalg.norm(axis)
+    if n < 1e-9:  # 180 degrees: axis from the symmetric part
+        vals, vecs = np.linalg.eigh(Rrel + Rrel.T)
+        axis = vecs[:, np.argmax(vals)]
+    else:
+        axis = axis / n
+    K = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    out = []
+    for a in w * angle:
+        out.append(Ra @ (np.eye(3) + np.sin(a) * K + (1 - np.cos(a)) * (K @ K)))
+    return np.array(out)

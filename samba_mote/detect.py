@@ -40,7 +40,7 @@ class DetectConfig:
     auto_max: int = 230
     auto_every: int = 15  #: auto: refresh the statistics every this many frames
     min_area: int = 2  #: pixels above threshold
-    max_area: int = 600
+    max_area: int = 150  #: at 160x120 a marker is <= ~40 px, two merged <= ~90
     max_aspect: float = 3.5  #: bounding-box long side / short side
     min_fill: float = 0.25  #: pixels above threshold / bounding-box area
     pad: int = 2  #: ROI padding around the blob for the weighted centroid (px)
@@ -63,13 +63,15 @@ class DetectConfig:
 @dataclass
 class Detections:
     """Blobs of one frame. uv: (N, 2) float32 px; area: (N,) int32 px above threshold;
-    size: (N, 2) int32 bounding box (w, h); peak: (N,) uint8 max grey level."""
+    size: (N, 2) int32 bounding box (w, h); peak: (N,) uint8 max grey level; cov: (N, 3)
+    float32 intensity-weighted second central moments (var_u, cov_uv, var_v) in px^2."""
 
     uv: np.ndarray
     area: np.ndarray
     size: np.ndarray
     peak: np.ndarray
     threshold: int
+    cov: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.uv)
@@ -77,7 +79,7 @@ class Detections:
     @classmethod
     def empty(cls, threshold: int) -> "Detections":
         return cls(np.zeros((0, 2), np.float32), np.zeros(0, np.int32), np.zeros((0, 2), np.int32),
-                   np.zeros(0, np.uint8), threshold)
+                   np.zeros(0, np.uint8), threshold, np.zeros((0, 3), np.float32))
 
 
 class StaticMask:
@@ -189,7 +191,9 @@ class Detector:
             m = cv2.moments(cv2.subtract(roi, floor))
             if m["m00"] <= 0:
                 continue
-            rows.append((x0 + m["m10"] / m["m00"], y0 + m["m01"] / m["m00"], area, bw, bh, int(roi.max())))
+            m00 = m["m00"]
+            rows.append((x0 + m["m10"] / m00, y0 + m["m01"] / m00, area, bw, bh, int(roi.max()),
+                         m["mu20"] / m00, m["mu11"] / m00, m["mu02"] / m00))
         if not rows:
             return Detections.empty(thr)
         a = np.asarray(rows, dtype=np.float64)
@@ -200,4 +204,4 @@ class Detector:
             self.masked += int((~keep).sum())
             a = a[keep]
         return Detections(a[:, :2].astype(np.float32), a[:, 2].astype(np.int32), a[:, 3:5].astype(np.int32),
-                          a[:, 5].astype(np.uint8), thr)
+                          a[:, 5].astype(np.uint8), thr, a[:, 6:9].astype(np.float32))

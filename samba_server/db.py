@@ -123,6 +123,11 @@ def default_db_path() -> Path:
     return Path(str(files("samba_common").joinpath("data", DEFAULT_DB_NAME)))
 
 
+def sample_path() -> Path:
+    """Path of the sample markers.npz shipped inside the package (scripts/make_sample.py)."""
+    return Path(str(files("samba_common").joinpath("data", "sample_markers.npz")))
+
+
 def load_default_db() -> MotionDB:
     """The shipped default database (built from the CMU clips, see samba_common/data/README.md)."""
     return MotionDB.load(default_db_path())

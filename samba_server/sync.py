@@ -36,7 +36,7 @@ class SyncConfig:
     max_wait_ms: float = 12.0  #: extra wait for late/jittered packets after the frame's window
     offset_window_s: float = 4.0  #: sliding window of the per-mote minimum-delay filter
     dead_after_ms: float = 250.0  #: a mote silent this long is not waited for
-    restart_seq_gap: int = 1000  #: a backwards seq jump larger than this = mote restarted
+    restart_seq_gap: int = 30  #: a backwards seq jump larger than this = mote restarted
 
     def __post_init__(self) -> None:
         if self.fps <= 0 or not 0 < self.group_tolerance <= 1 or self.max_wait_ms < 0:
@@ -76,7 +76,7 @@ class MoteSyncStats:
     received: int = 0
     late: int = 0
     duplicate: int = 0
-    restarts: int = 0
+    restarts: int = 0  #: came back after a silence or a seq reset (clock estimate reset)
     offset_ns: int = 0
     last_arrival_ns: int = 0
 
@@ -124,8 +124,14 @@ class FrameSync:
         self.frames_incomplete = 0
 
     # ------------------------------------------------------------------ inputs
-    def mote_joined(self, mote_id: str) -> None:
-        """A mote (re)appeared: forget its clock estimate (it may have restarted)."""
+    def mote_joined(self, mote_id: str, now_ns: int | None = None) -> None:
+        """A mote (re)appeared: wait for it from now on; forget its clock estimate."""
+        if now_ns is not None:
+            self.now_ns = max(self.now_ns, now_ns)
+        st = self.motes.setdefault(mote_id, MoteSyncStats())
+        if st.received:
+            st.restarts += 1
+        st.last_arrival_ns = max(st.last_arrival_ns, self.now_ns)
         self._gone.discard(mote_id)
         self._delay.pop(mote_id, None)
         self._last_seq.pop(mote_id, None)
@@ -139,6 +145,7 @@ class FrameSync:
         """Add one packet; returns the frames that are ready, oldest first."""
         out = self.poll(p.arrival_ns)
         st = self.motes.setdefault(p.mote_id, MoteSyncStats())
+        silent = st.received > 0 and p.arrival_ns - st.last_arrival_ns > self._dead
         st.received += 1
         st.last_arrival_ns = p.arrival_ns
         self._gone.discard(p.mote_id)
@@ -146,9 +153,9 @@ class FrameSync:
         if last is not None and p.seq == last:
             st.duplicate += 1
             return out
-        if last is not None and p.seq < last - self.config.restart_seq_gap:
+        if last is not None and (silent or p.seq < last - self.config.restart_seq_gap):
             st.restarts += 1
-            log.info("mote %s restarted (seq %d after %d): clock estimate reset", p.mote_id, p.seq, last)
+            log.info("mote %s is back (seq %d after %d): clock estimate reset", p.mote_id, p.seq, last)
             self._delay.pop(p.mote_id, None)
         self._last_seq[p.mote_id] = p.seq
         est = self._delay.get(p.mote_id)
@@ -205,7 +212,7 @@ class FrameSync:
     def _emit(self, fr: _Pending, alive: set[str] | None = None) -> Frame:
         alive = set(self.alive()) if alive is None else alive
         missing = tuple(sorted(alive - fr.packets.keys()))
-        t = round(sum(p.tc_ns for p in fr.packets.values()) / len(fr.packets))
+        t = sum(p.tc_ns for p in fr.packets.values()) // len(fr.packets)
         t = max(t, self._last_t + 1)
         self._last_t = t
         self.last_anchor = fr.anchor if self.last_anchor is None else max(self.last_anchor, fr.anchor)

@@ -15,19 +15,26 @@ from samba_common.skeleton import BONE_TYPES, J, N_JOINTS
 _L = {name: i for i, name in enumerate(BONE_TYPES)}
 
 
-def tpose(lengths: np.ndarray, hip_xy: np.ndarray = (0.0, 0.0), ankle_z: float = 0.08) -> np.ndarray:
+def tpose(lengths: np.ndarray, hip_xy: np.ndarray = (0.0, 0.0), ankle_z: float = 0.08,
+          stance: float = 0.08) -> np.ndarray:
     """T-pose joints (13, 3): lengths (8,) in BONE_TYPES order (metres), hip midpoint at
-    ``hip_xy`` (2,), ankles at height ``ankle_z``; facing +Y, right hand toward +X."""
+    ``hip_xy`` (2,), ankles at height ``ankle_z``; facing +Y, right hand toward +X.
+
+    The straight legs spread so that each ankle is ``stance`` m further out than its hip
+    (feet about shoulder-width apart, so knee and ankle markers stay apart in the images)."""
     ln = {k: float(lengths[i]) for k, i in _L.items()}
     x0, y0 = float(hip_xy[0]), float(hip_xy[1])
-    hip_z = ankle_z + ln["shin"] + ln["thigh"]
+    leg = ln["shin"] + ln["thigh"]
+    drop = float(np.sqrt(max(leg ** 2 - stance ** 2, 1e-6)))
+    hip_z = ankle_z + drop
     sh_z = hip_z + ln["torso"]
     out = np.zeros((N_JOINTS, 3))
     for side, s in (("left", -1.0), ("right", 1.0)):  # the subject's right is +X
         hx = x0 + s * ln["hip_width"] / 2
         out[J[f"{side}_hip"]] = (hx, y0, hip_z)
-        out[J[f"{side}_knee"]] = (hx, y0, hip_z - ln["thigh"])
-        out[J[f"{side}_ankle"]] = (hx, y0, ankle_z)
+        f = ln["thigh"] / leg
+        out[J[f"{side}_knee"]] = (hx + s * stance * f, y0, hip_z - drop * f)
+        out[J[f"{side}_ankle"]] = (hx + s * stance, y0, ankle_z)
         sx = x0 + s * ln["shoulder_width"] / 2
         out[J[f"{side}_shoulder"]] = (sx, y0, sh_z)
         out[J[f"{side}_elbow"]] = (sx + s * ln["upper_arm"], y0, sh_z)
@@ -36,7 +43,7 @@ def tpose(lengths: np.ndarray, hip_xy: np.ndarray = (0.0, 0.0), ankle_z: float =
     return out
 
 
-def _heading(joints: np.ndarray) -> float:
+def heading(joints: np.ndarray) -> float:
     """Yaw (rad) of the facing direction of (13, 3) joints; 0 = facing +Y."""
     x = joints[J["left_shoulder"]] - joints[J["right_shoulder"]]  # points to the subject's left
     # facing = z_up x left... for a T-pose facing +Y, left = -X, so facing = (left rotated -90 deg)
@@ -65,7 +72,7 @@ def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1
     tp = tpose(lengths, hip[:2], ankle_z)
     n_hold = int(round(hold * fps))
     n_tr = int(round(transition * fps))
-    yaw = _heading(first)
+    yaw = heading(first)
     yaw = (yaw + np.pi) % (2 * np.pi) - np.pi
     tp_hip = 0.5 * (tp[J["left_hip"]] + tp[J["right_hip"]])
     local_tp = tp - tp_hip

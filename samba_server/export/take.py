@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from samba_common.formats import FormatError, load_joints, load_markers
+from samba_common.formats import load_joints, load_markers
 from samba_common.skeleton import JOINT_NAMES, MARKER_NAMES
 
 log = logging.getLogger(__name__)
@@ -82,24 +82,44 @@ def load_take(path: str | os.PathLike, markers_path: str | os.PathLike | None = 
     return _check(take)
 
 
+def read_mcap_poses(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The ``/pose`` messages of a Samba recording (through :mod:`samba_server.record`).
+
+    Returns (joints (F, 13, 3) metres NaN rows = unsolved, t_ns (F,) int64 capture times,
+    markers (F, 8, 3) metres NaN = missing, number of undecodable messages skipped).
+    """
+    from samba_common.pose_wire import PoseError, decode_pose
+    from samba_server import record
+
+    joints, t_ns, markers, bad = [], [], [], 0
+    for msg in record.iter_messages(path, topics=[record.POSE_TOPIC]):
+        try:
+            pose = decode_pose(msg.data)
+        except PoseError as exc:
+            bad += 1
+            log.debug("%s: skipped a bad pose message (%s)", path, exc)
+            continue
+        joints.append(np.asarray(pose.joints, dtype=np.float64))
+        t_ns.append(int(pose.t_ns))
+        m = pose.markers
+        markers.append(np.full((len(MARKER_NAMES), 3), np.nan) if m is None else np.asarray(m, dtype=np.float64))
+    if bad:
+        log.warning("%s: skipped %d undecodable pose messages", path, bad)
+    return (np.asarray(joints).reshape(-1, len(JOINT_NAMES), 3), np.asarray(t_ns, dtype=np.int64),
+            np.asarray(markers).reshape(-1, len(MARKER_NAMES), 3), bad)
+
+
 def _load_mcap(p: Path) -> ExportTake:
-    """Joints (and markers) from a Samba recording, through the server's reader."""
+    """Joints and markers from a Samba recording; t in seconds from the first pose."""
     try:
-        from samba_server import record
-    except ImportError as exc:  # the recorder module is not installed in this tree
-        raise TakeError(f"{p}: cannot read .mcap takes here ({exc})") from None
-    try:
-        poses = record.read_poses(p)
-    except (FormatError, ValueError, OSError) as exc:
-        raise TakeError(f"{p}: cannot read poses ({exc})") from None
-    joints = np.asarray(poses.joints, dtype=np.float64)
-    t = np.asarray(poses.t, dtype=np.float64)
-    markers = getattr(poses, "markers", None)
-    if markers is not None:
-        markers = np.asarray(markers, dtype=np.float64)
+        joints, t_ns, markers, _ = read_mcap_poses(p)
+    except (ValueError, OSError) as exc:
+        raise TakeError(f"{p}: cannot read the recording ({exc})") from None
     if joints.shape[0] == 0:
         raise TakeError(f"{p}: the recording holds no poses (was the server solving?)")
-    return ExportTake(joints, t, markers, str(p))
+    order = np.argsort(t_ns, kind="stable")
+    t = (t_ns[order] - t_ns[order[0]]) / 1e9
+    return ExportTake(joints[order], t, markers[order], str(p))
 
 
 def fill_invalid(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

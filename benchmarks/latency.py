@@ -1,0 +1,117 @@
+"""Latency of the live server: capture time -> pose published, over real Zenoh on loopback.
+
+Simulated motes run in a separate process (``python -m samba_server.simmotes``) on the same
+machine and clock; the server runs here. Latency is ``publish time - frame time``, where the
+frame time is the mean corrected capture time of the frame's packets (it trails the true
+capture by the minimum transport latency, about 0.15 ms on loopback). Two configurations:
+
+- ``pipeline``: ingest, sync, triangulation, swap check, publish (no skeleton solve);
+- ``full``: the same plus ``Reconstructor.solve`` on every frame the server keeps up with
+  (``max_lag_ms`` from configs/server.toml skips the solve of frames that are already late).
+
+Also searched: the highest mote frame rate (4 motes) the pipeline sustains without falling
+behind (>= 95 % of frames out, median latency not growing). Appends to docs/BENCHMARKS.md.
+Usage: ``python benchmarks/latency.py [--seconds 5] [--no-write]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from samba_common.calib import default_rig
+from samba_server.live import LiveServer
+from samba_server.server import Server, ServerConfig
+from samba_server.server_cli import load_server_configs, make_reconstructor
+from samba_server.sync import SyncConfig
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _endpoint() -> str:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+
+
+def run(n_motes: int, fps: float, seconds: float, solve: bool) -> dict:
+    cfg = load_server_configs()
+    ep = _endpoint()
+    server = Server(default_rig(n_motes), reconstructor=make_reconstructor(None) if solve else None,
+                    config=ServerConfig(keep_history=False, max_lag_ms=cfg.server.max_lag_ms),
+                    sync_config=SyncConfig(**{**cfg.sync.__dict__, "fps": fps}), tri_config=cfg.triangulate,
+                    swap_config=cfg.swap)
+    with LiveServer(server, session="bench", listen=[ep]):
+        proc = subprocess.Popen([sys.executable, "-m", "samba_server.simmotes", "--connect", ep, "--motes",
+                                 str(n_motes), "--fps", str(fps), "--duration", str(seconds)],
+                                stdout=subprocess.PIPE, text=True)
+        ready = proc.stdout.readline().strip()
+        out = proc.communicate(timeout=seconds + 30)[0]
+        time.sleep(0.3)
+    lat = np.array(server.stats.latency_ms)
+    lat = lat[len(lat) // 10:]  # drop the start-up (clock filter warm-up, body estimate)
+    half = len(lat) // 2
+    expected = seconds * fps
+    return {"motes": n_motes, "fps": fps, "solve": solve, "ready": ready == "ready",
+            "sent": out.strip(), "frames": server.stats.frames, "expected": int(expected),
+            "solved": server.stats.solved, "skipped": server.stats.solve_skipped,
+            "p50": float(np.percentile(lat, 50)) if len(lat) else float("nan"),
+            "p99": float(np.percentile(lat, 99)) if len(lat) else float("nan"),
+            "growing": bool(half > 10 and np.median(lat[half:]) > 2 * np.median(lat[:half]) + 5),
+            "late": sum(m.late for m in server.sync.motes.values())}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seconds", type=float, default=5.0)
+    ap.add_argument("--no-write", action="store_true")
+    args = ap.parse_args()
+    rows = []
+    for solve in (False, True):
+        for n in (2, 4):
+            r = run(n, 60.0, args.seconds, solve)
+            rows.append(r)
+            print(r, flush=True)
+    best = None
+    for fps in (60, 120, 180, 240, 360):
+        r = run(4, float(fps), args.seconds, False)
+        print(r, flush=True)
+        if r["frames"] >= 0.95 * r["expected"] and not r["growing"]:
+            best = fps
+        else:
+            break
+    lines = [f"## Server latency (benchmarks/latency.py) — {datetime.date.today()}",
+             f"Machine: {platform.platform()}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+             f"Python {platform.python_version()}. Motes simulated in a separate process, Zenoh over loopback, "
+             f"{args.seconds:.0f} s per run. Latency = pose publish - frame capture time (server clock).", "",
+             "| motes x fps | solve | frames out / expected | solved (skipped) | p50 ms | p99 ms | late pkts |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['motes']} x {r['fps']:.0f} | {'yes' if r['solve'] else 'no'} | {r['frames']} / "
+                     f"{r['expected']} | {r['solved']} ({r['skipped']}) | {r['p50']:.2f} | {r['p99']:.2f} | {r['late']} |")
+    lines += ["", f"Highest rate sustained by the pipeline without the solve at 4 motes: {best} fps "
+              "(tried 60, 120, 180, 240, 360).", "Targets: p50 <= 5 ms, p99 <= 15 ms at 4 x 60.", ""]
+    text = "\n".join(lines)
+    print(text)
+    if not args.no_write:
+        path = ROOT / "docs" / "BENCHMARKS.md"
+        old = path.read_text() if path.exists() else "# Benchmarks\n\n"
+        start = old.find("## Server latency")
+        if start >= 0:
+            end = old.find("\n## ", start + 1)
+            old = old[:start] + (old[end + 1:] if end >= 0 else "")
+        path.write_text(old.rstrip() + "\n\n" + text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

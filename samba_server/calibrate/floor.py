@@ -1,0 +1,134 @@
+"""World frame (origin, Z up, heading) from an L-frame or from a subject in the standard pose.
+
+Both return the similarity of the world ``x_new = A @ x_old + b`` and apply it to a rig with
+:func:`samba_server.calibrate.bundle.transform_rig`.
+
+* L-frame: three markers, a corner and two arms at a right angle; the corner is the origin,
+  the **short arm points to +X, the long arm to +Y**, Z = X x Y is up; the markers' centres sit
+  ``height`` metres above the floor.
+* Standard pose (FORMATS.md): subject standing upright facing +Y, arms out; +X points from the
+  subject's left to right wrist/shoulder, Z along the body axis, origin between the ankles on
+  the floor (ankle markers ``ankle_height`` above it).
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+
+import numpy as np
+
+from samba_common.calib import CameraRig
+from samba_common.skeleton import M
+from samba_server.calibrate.bundle import transform_rig
+from samba_server.calibrate.wand import CalibrateError
+from samba_server.triangulate import TriangulateConfig, Triangulator
+
+log = logging.getLogger(__name__)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def frame_from_axes(origin: np.ndarray, x_dir: np.ndarray, up: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World change (A (3, 3), b (3,)) putting ``origin`` at 0, ``up`` on +Z and ``x_dir``
+    (made orthogonal to up) on +X."""
+    z = _unit(np.asarray(up, float))
+    x = _unit(np.asarray(x_dir, float) - (np.asarray(x_dir, float) @ z) * z)
+    y = np.cross(z, x)
+    A = np.stack([x, y, z])
+    return A, -A @ np.asarray(origin, float)
+
+
+def match_views(rig: CameraRig, uv: np.ndarray) -> np.ndarray:
+    """Label unlabelled blobs consistently across views by epipolar fit.
+
+    uv: (F, C, K, 2) raw pixels, any order per view, NaN = view missing. Each view's order is
+    permuted to match the first camera that sees the frame (best 2-view reprojection error
+    over all K! orders). Returns the reordered array."""
+    F, C, K, _ = uv.shape
+    out = uv.copy()
+    seen = np.all(np.isfinite(uv), axis=(2, 3))
+    ref = np.argmax(seen, axis=1)  # first camera seeing each frame
+    perms = list(itertools.permutations(range(K)))
+    for r in range(C):
+        for c in range(C):
+            fr = np.flatnonzero((ref == r) & seen[:, c] & seen[:, r]) if c != r else []
+            if not len(fr):
+                continue
+            tri = Triangulator(CameraRig([rig.cameras[r], rig.cameras[c]]), TriangulateConfig(max_error_px=1e9))
+            best = np.full(len(fr), np.inf)
+            choice = np.zeros((len(fr), K), dtype=int)
+            for p in perms:
+                pu = uv[fr, c][:, list(p)]
+                res = tri.triangulate(np.stack([uv[fr, r].reshape(-1, 2), pu.reshape(-1, 2)]))
+                cost = np.nansum(res.error.reshape(len(fr), K) ** 2, axis=1)
+                cost[~np.all(np.isfinite(res.error.reshape(len(fr), K)), axis=1)] = np.inf
+                better = cost < best
+                best[better] = cost[better]
+                choice[better] = p
+            out[fr, c] = np.take_along_axis(uv[fr, c], choice[..., None], axis=1)
+    return out
+
+
+def triangulate_static(rig: CameraRig, uv: np.ndarray) -> np.ndarray:
+    """Median 3D positions (K, 3) of a static unlabelled object seen in uv (F, C, K, 2); the
+    labels follow the first camera's order and are only consistent if it sees every frame,
+    so points are sorted per frame by a canonical order (distance to the centroid)."""
+    m = match_views(rig, uv)
+    F, C, K, _ = uv.shape
+    res = Triangulator(rig).triangulate(m.transpose(1, 0, 2, 3).reshape(C, F * K, 2))
+    P = res.points.reshape(F, K, 3)
+    ok = np.all(np.isfinite(P), axis=(1, 2))
+    if not ok.any():
+        raise CalibrateError("the static object was not seen by two cameras at once")
+    P = P[ok]
+    # canonical order per frame: by distance from the centroid (L-frame: corner nearest)
+    d = np.linalg.norm(P - P.mean(axis=1, keepdims=True), axis=2)
+    P = np.take_along_axis(P, np.argsort(d, axis=1)[..., None], axis=1)
+    return np.median(P, axis=0)
+
+
+def lframe_transform(points: np.ndarray, height: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """World change from three L-frame marker positions (3, 3) in any order (see module doc)."""
+    P = np.asarray(points, float)
+    if P.shape != (3, 3) or not np.all(np.isfinite(P)):
+        raise CalibrateError("the L-frame needs three triangulated markers")
+    best, corner = np.inf, 0
+    for k in range(3):
+        a, b = [P[j] - P[k] for j in range(3) if j != k]
+        cosang = abs(a @ b) / (np.linalg.norm(a) * np.linalg.norm(b))
+        if cosang < best:
+            best, corner = cosang, k
+    if best > np.cos(np.radians(75)):
+        raise CalibrateError(f"the three markers do not form a right angle (best {np.degrees(np.arccos(best)):.0f} deg)")
+    arms = [P[j] - P[corner] for j in range(3) if j != corner]
+    arms.sort(key=np.linalg.norm)
+    x_arm, y_arm = arms
+    if abs(np.linalg.norm(y_arm) - np.linalg.norm(x_arm)) < 0.02:
+        raise CalibrateError("L-frame arms have nearly equal length: cannot tell X from Y")
+    z = _unit(np.cross(x_arm, y_arm))
+    origin = P[corner] - height * z
+    return frame_from_axes(origin, x_arm, z)
+
+
+def standard_pose_transform(markers: np.ndarray, ankle_height: float = 0.08) -> tuple[np.ndarray, np.ndarray]:
+    """World change from labelled markers (F, 8, 3) of a subject standing in the standard pose
+    (use the first second of a take): the median over frames is used."""
+    m = np.nanmedian(np.asarray(markers, float), axis=0)
+    need = ["left_shoulder", "right_shoulder", "left_ankle", "right_ankle"]
+    if not all(np.all(np.isfinite(m[M[n]])) for n in need):
+        raise CalibrateError(f"standard pose: markers {need} must all be triangulated")
+    x = m[M["right_shoulder"]] - m[M["left_shoulder"]]
+    if np.all(np.isfinite(m[[M["left_wrist"], M["right_wrist"]]])):
+        x = x + m[M["right_wrist"]] - m[M["left_wrist"]]
+    ankles = 0.5 * (m[M["left_ankle"]] + m[M["right_ankle"]])
+    up = 0.5 * (m[M["left_shoulder"]] + m[M["right_shoulder"]]) - ankles
+    z = _unit(up - (up @ _unit(x)) * _unit(x))
+    return frame_from_axes(ankles - ankle_height * z, x, z)
+
+
+def apply_transform(rig: CameraRig, A: np.ndarray, b: np.ndarray) -> CameraRig:
+    """The rig in the new world ``x_new = A @ x_old + b``."""
+    return CameraRig(transform_rig(rig.cameras, A, b), dict(rig.metadata))

@@ -1,0 +1,100 @@
+"""Simulated calibration takes with ground truth: a waved wand and a static L-frame.
+
+2D observations come straight from the rig projection plus Gaussian pixel noise (no
+rendering), unlabelled per view like the motes' unlabelled mode: each view lists its blobs
+in random order, and a view that does not see all markers of the object is NaN.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from samba_common.calib import CameraRig
+
+#: default L-frame: corner marker at the origin, long arm (+Y) 0.40 m, short arm (+X) 0.30 m
+LFRAME_ARMS = (0.30, 0.40)
+
+
+@dataclass
+class SimObservations:
+    """uv: (F, C, K, 2) raw pixels, per view in random order, NaN = view missed a marker;
+    points: (F, K, 3) true marker positions (world m); t: (F,) seconds."""
+
+    uv: np.ndarray
+    points: np.ndarray
+    t: np.ndarray
+
+
+def observe(rig: CameraRig, points: np.ndarray, noise_px: float, rng: np.random.Generator,
+            shuffle: bool = True, margin: float = 1.0) -> np.ndarray:
+    """Project points (F, K, 3) into every camera -> (F, C, K, 2) with noise; views in which a
+    marker is behind the camera or outside the image are NaN as a whole."""
+    F, Kw, _ = points.shape
+    uv = rig.project(points.reshape(-1, 3)).reshape(len(rig), F, Kw, 2).transpose(1, 0, 2, 3).copy()
+    uv += rng.normal(0.0, noise_px, uv.shape)
+    for c, cam in enumerate(rig.cameras):
+        inside = cam.in_image(uv[:, c].reshape(-1, 2), margin).reshape(F, Kw)
+        uv[~inside.all(axis=1), c] = np.nan
+    if shuffle:
+        order = np.argsort(rng.random((F, len(rig), Kw)), axis=2)
+        uv = np.take_along_axis(uv, order[..., None], axis=2)
+    return uv
+
+
+def wand_motion(n_frames: int, offsets: np.ndarray, rng: np.random.Generator, fps: float = 60.0,
+                half: float = 1.5, z_range: tuple[float, float] = (0.2, 2.0)) -> tuple[np.ndarray, np.ndarray]:
+    """A wand waved smoothly through the volume: points (F, K, 3) world m, t (F,) s."""
+    offsets = np.asarray(offsets, dtype=float)
+    t = np.arange(n_frames) / fps
+    lo = np.array([-half, -half, z_range[0]])
+    hi = np.array([half, half, z_range[1]])
+    # centre: sum of slow random sinusoids mapped into the box
+    freqs = rng.uniform(0.05, 0.35, (3, 3))
+    phases = rng.uniform(0, 2 * np.pi, (3, 3))
+    s = np.sum(np.sin(2 * np.pi * freqs[None] * t[:, None, None] + phases[None]), axis=2) / 3.0  # (F,3) in [-1,1]
+    centre = lo + (hi - lo) * (0.5 + 0.5 * s)
+    # direction: smoothly tumbling
+    wf = rng.uniform(0.2, 0.8, 3)
+    wp = rng.uniform(0, 2 * np.pi, 3)
+    d = np.stack([np.sin(2 * np.pi * wf[0] * t + wp[0]), np.cos(2 * np.pi * wf[1] * t + wp[1]),
+                  0.8 * np.sin(2 * np.pi * wf[2] * t + wp[2])], axis=1)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    mid = 0.5 * (offsets[0] + offsets[-1])
+    pts = centre[:, None, :] + (offsets - mid)[None, :, None] * d[:, None, :]
+    return pts, t
+
+
+def simulate_wand(rig: CameraRig, n_frames: int = 600, length: float = 0.5, mid: float | None = None,
+                  noise_px: float = 0.2, seed: int = 0, fps: float = 60.0) -> SimObservations:
+    """A wand take seen by ``rig``: 2 markers ``length`` apart (a third at ``mid`` if given)."""
+    rng = np.random.default_rng(seed)
+    offsets = np.array([0.0, length] if mid is None else [0.0, mid, length])
+    pts, t = wand_motion(n_frames, offsets, rng, fps)
+    return SimObservations(observe(rig, pts, noise_px, rng), pts, t)
+
+
+def lframe_points(arms: tuple[float, float] = LFRAME_ARMS, height: float = 0.0) -> np.ndarray:
+    """L-frame markers (3, 3) world m: corner at the origin, short arm +X, long arm +Y."""
+    sx, ly = arms
+    return np.array([[0.0, 0.0, height], [sx, 0.0, height], [0.0, ly, height]])
+
+
+def simulate_lframe(rig: CameraRig, n_frames: int = 30, noise_px: float = 0.2, seed: int = 0,
+                    arms: tuple[float, float] = LFRAME_ARMS, height: float = 0.0, fps: float = 60.0) -> SimObservations:
+    """A static L-frame lying on the floor at the origin, seen for ``n_frames`` frames."""
+    rng = np.random.default_rng(seed)
+    pts = np.repeat(lframe_points(arms, height)[None], n_frames, axis=0)
+    return SimObservations(observe(rig, pts, noise_px, rng), pts, np.arange(n_frames) / fps)
+
+
+def save_observations(path: str | os.PathLike, obs: SimObservations, names: list[str], kind: str,
+                      offsets: np.ndarray | None = None) -> None:
+    """Write a simulated take as ``.npz``: uv (F, C, K, 2), camera_names, t, and the ground
+    truth points (F, K, 3); ``kind`` is "wand" or "lframe"."""
+    extra = {} if offsets is None else {"offsets": np.asarray(offsets, float)}
+    np.savez_compressed(Path(path), uv=obs.uv, t=obs.t, points=obs.points,
+                        camera_names=np.array(names), kind=np.array(kind), **extra)

@@ -1,0 +1,297 @@
+"""Extrinsics from a wand take: essential matrix, incremental PnP, label resolution, bundle adjustment.
+
+Input: the cameras' intrinsics (poses ignored) and unlabelled 2D observations of a wand with
+``K`` collinear markers (2, optionally 3) at known offsets, as an array ``uv`` (F, C, K, 2)
+raw pixels: for each frame and camera the K blobs in any order, NaN where the camera did not
+see exactly K blobs. Steps:
+
+1. the camera pair sharing most frames: essential matrix (RANSAC) from both possible matchings
+   of the wand ends per frame (the wrong one is an outlier), relative pose, metric scale from
+   the median wand length;
+2. every other camera, in order of shared frames: PnP (RANSAC, both matchings) against the
+   triangulated wand ends;
+3. per frame, the labelling of the ends in every view that minimises reprojection error;
+4. bundle adjustment over all camera poses and all wand positions (rigid wand of the given
+   length = metric scale), robust loss, one more pass without outlier observations;
+5. world frame: provisional (Z up from the mean camera "up", origin under the wand centroid,
+   floor at the lowest wand marker) until ``floor`` sets it properly.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+from samba_common.calib import Camera, CameraRig, rotation_to_rvec
+from samba_server.calibrate.bundle import Observations, bundle_adjust, camera_from_pose, transform_rig
+from samba_server.triangulate import TriangulateConfig, Triangulator
+
+log = logging.getLogger(__name__)
+
+
+class CalibrateError(RuntimeError):
+    """The data cannot determine the calibration (too few shared views, unseen cameras...)."""
+
+
+@dataclass
+class WandReport:
+    """Quality figures of a wand calibration."""
+
+    rms_px: dict[str, float]  #: reprojection rms per camera (px), bundle adjustment residuals
+    n_obs: dict[str, int]  #: observations per camera used in the final adjustment
+    wand_mean_m: float  #: mean free-triangulated wand length (m)
+    wand_sigma_m: float  #: its standard deviation (m)
+    n_frames: int  #: wand positions used
+    coverage: dict[str, float] = field(default_factory=dict)  #: "camA-camB" -> fraction of volume cells
+    pair_frames: dict[str, int] = field(default_factory=dict)  #: "camA-camB" -> frames seen by both
+
+    @property
+    def rms_total(self) -> float:
+        n = sum(self.n_obs.values())
+        return float(np.sqrt(sum(self.rms_px[k] ** 2 * self.n_obs[k] for k in self.n_obs) / max(n, 1)))
+
+    def lines(self) -> list[str]:
+        out = [f"wand positions used: {self.n_frames}",
+               f"wand length: mean {self.wand_mean_m * 1000:.2f} mm, sigma {self.wand_sigma_m * 1000:.2f} mm",
+               f"reprojection rms: {self.rms_total:.3f} px overall"]
+        out += [f"  {k}: {self.rms_px[k]:.3f} px over {self.n_obs[k]} observations" for k in self.rms_px]
+        out.append("coverage per camera pair (shared frames, fraction of the 4x4x2 m volume in 0.5 m cells):")
+        out += [f"  {k}: {self.pair_frames.get(k, 0)} frames, {v * 100:.0f} %" for k, v in self.coverage.items()]
+        return out
+
+
+def normalized(cam: Camera, uv: np.ndarray) -> np.ndarray:
+    """Raw pixels (..., 2) -> undistorted normalised coordinates (..., 2)."""
+    shp = uv.shape
+    return cam.undistort_normalized(uv.reshape(-1, 2)).reshape(shp)
+
+
+def _order_collinear(uv: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Sort K >= 3 blobs of each view (F, C, K, 2) along the wand line (end to end)."""
+    c = np.nanmean(uv, axis=2, keepdims=True)
+    d = uv - c
+    # principal direction per view
+    cov = np.einsum("fcki,fckj->fcij", np.nan_to_num(d), np.nan_to_num(d))
+    _, vecs = np.linalg.eigh(cov)
+    axis = vecs[..., :, -1]
+    s = np.einsum("fcki,fci->fck", np.nan_to_num(d), axis)
+    order = np.argsort(s, axis=2)
+    out = np.take_along_axis(uv, order[..., None], axis=2)
+    # put the end nearer to the middle marker's offset side first, like ``offsets``
+    mid_off = (offsets[1] - offsets[0]) / (offsets[-1] - offsets[0])
+    seg = np.linalg.norm(out[:, :, 1] - out[:, :, 0], axis=-1) / np.linalg.norm(out[:, :, -1] - out[:, :, 0], axis=-1)
+    flip = np.abs(seg - mid_off) > np.abs((1 - seg) - mid_off)
+    out[flip] = out[flip][:, ::-1]
+    return out
+
+
+def _triangulator(cams: list[Camera]) -> Triangulator:
+    return Triangulator(CameraRig(cams), TriangulateConfig(max_error_px=1e9, iterations=2))
+
+
+def _resolve(cams: list[Camera | None], uv: np.ndarray, symmetric: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Choose per frame the end labelling in each posed view that fits best.
+
+    cams: (C,) posed cameras or None; uv (F, C, K, 2). Returns uv with the chosen orders,
+    points (F, K, 3) (NaN where < 2 posed views) and rms (F,) px."""
+    F, C, Kw, _ = uv.shape
+    posed = [c for c in range(C) if cams[c] is not None]
+    tri = _triangulator([cams[c] for c in posed])
+    sub = uv[:, posed]
+    best_cost = np.full(F, np.inf)
+    best = np.zeros((F, len(posed)), dtype=bool)
+    best_pts = np.full((F, Kw, 3), np.nan)
+    best_rms = np.full(F, np.nan)
+    for bits in itertools.product((False, True), repeat=len(posed) - 1):
+        flips = np.array((False,) + bits)
+        u = sub.copy()
+        u[:, flips] = u[:, flips][:, :, ::-1]
+        res = tri.triangulate(u.transpose(1, 0, 2, 3).reshape(len(posed), F * Kw, 2))
+        rms = res.error.reshape(F, Kw)
+        cost = np.nanmean(rms ** 2, axis=1) if Kw else np.zeros(F)
+        cost = np.where(np.all(np.isfinite(rms), axis=1), cost, np.inf)
+        better = cost < best_cost
+        best_cost[better] = cost[better]
+        best[better] = flips
+        best_pts[better] = res.points.reshape(F, Kw, 3)[better]
+        best_rms[better] = np.sqrt(cost[better])
+    out = uv.copy()
+    for j, c in enumerate(posed):
+        f = best[:, j]
+        out[f, c] = out[f, c][:, ::-1]
+    return out, best_pts, best_rms
+
+
+def _initial_pair(cams: list[Camera], xy: np.ndarray, seen: np.ndarray, i: int, j: int, min_frames: int):
+    """Relative pose of camera j w.r.t. camera i (i at the origin), unit baseline."""
+    both = np.flatnonzero(seen[:, i] & seen[:, j])
+    if len(both) < min_frames:
+        raise CalibrateError(f"cameras {cams[i].name} and {cams[j].name} share only {len(both)} wand frames "
+                             f"(need >= {min_frames}): wave the wand where both cameras see it")
+    a = xy[both, i]  # (n, K, 2)
+    b = xy[both, j]
+    p1 = np.concatenate([a.reshape(-1, 2), a.reshape(-1, 2)])
+    p2 = np.concatenate([b.reshape(-1, 2), b[:, ::-1].reshape(-1, 2)])
+    f = 0.5 * (cams[i].matrix[0, 0] + cams[j].matrix[0, 0])
+    E, mask = cv2.findEssentialMat(p1, p2, np.eye(3), method=cv2.RANSAC, prob=0.9999, threshold=1.5 / f)
+    if E is None or E.shape != (3, 3):
+        raise CalibrateError(f"no essential matrix between {cams[i].name} and {cams[j].name}: degenerate wand motion")
+    inl = mask.ravel().astype(bool)
+    ok, R, t, _ = cv2.recoverPose(E, p1[inl], p2[inl], np.eye(3))
+    log.info("pair %s-%s: %d frames, essential matrix inliers %d/%d", cams[i].name, cams[j].name,
+             len(both), inl.sum(), len(inl))
+    return R, t.ravel()
+
+
+def _scale_and_world(cams: list[Camera], points: np.ndarray, up_from_cameras: bool = True) -> list[Camera]:
+    """Provisional world frame: Z up from the cameras' mean up, origin under the centroid of
+    ``points`` (N, 3) with the floor at their lowest height."""
+    up = -np.mean([c.R[1] for c in cams], axis=0)
+    up /= np.linalg.norm(up)
+    x = cams[0].R[0] - (cams[0].R[0] @ up) * up
+    x /= np.linalg.norm(x)
+    y = np.cross(up, x)
+    A = np.stack([x, y, up])
+    P = points @ A.T
+    b = -np.array([np.mean(P[:, 0]), np.mean(P[:, 1]), np.min(P[:, 2])])
+    return transform_rig(cams, A, b)
+
+
+def calibrate_wand(
+    rig: CameraRig,
+    uv: np.ndarray,
+    offsets: np.ndarray,
+    min_frames: int = 20,
+    max_error_px: float = 3.0,
+) -> tuple[CameraRig, WandReport]:
+    """Extrinsics of all cameras of ``rig`` (intrinsics kept) from wand observations.
+
+    uv: (F, C, K, 2) raw pixels, unlabelled per view, NaN where not seen; offsets: (K,)
+    metres of the markers along the wand (e.g. [0, 0.5]). Returns the calibrated rig in a
+    provisional world frame (see module doc) and the report. Raises CalibrateError when the
+    data cannot determine the answer.
+    """
+    cams0 = rig.cameras
+    F, C, Kw, _ = uv.shape
+    offsets = np.asarray(offsets, dtype=float)
+    if C != len(cams0) or len(offsets) != Kw or Kw < 2:
+        raise ValueError("uv must be (F, C, K, 2) with C cameras and K = len(offsets) >= 2")
+    L = float(offsets[-1] - offsets[0])
+    uv = np.array(uv, dtype=float)
+    seen = np.all(np.isfinite(uv), axis=(2, 3))
+    for c in range(C):
+        if not seen[:, c].any():
+            raise CalibrateError(f"camera {cams0[c].name} never saw the wand ({Kw} markers)")
+    if Kw >= 3:
+        uv = _order_collinear(uv, offsets)
+    xy = np.stack([normalized(cams0[c], uv[:, c]) for c in range(C)], axis=1)
+    co = np.array([[np.sum(seen[:, a] & seen[:, b]) if a != b else 0 for b in range(C)] for a in range(C)])
+    i, j = np.unravel_index(np.argmax(co), co.shape)
+    R, t = _initial_pair(cams0, xy, seen, int(i), int(j), min_frames)
+    posed: list[Camera | None] = [None] * C
+    posed[i] = camera_from_pose(cams0[i], np.eye(3), np.zeros(3))
+    posed[j] = camera_from_pose(cams0[j], R, t)
+    uv, pts, rms = _resolve(posed, uv, symmetric=Kw == 2)
+    good = np.isfinite(rms) & (rms < 5 * max_error_px)
+    lengths = np.linalg.norm(pts[good, -1] - pts[good, 0], axis=1)
+    if not len(lengths):
+        raise CalibrateError("no wand frame could be triangulated from the first camera pair")
+    s = L / np.median(lengths)
+    posed[j] = camera_from_pose(cams0[j], R, t * s)
+    while any(p is None for p in posed):
+        uv, pts, rms = _resolve(posed, uv, symmetric=Kw == 2)
+        have = np.isfinite(rms) & (rms < 5 * max_error_px)
+        cand = [(int(np.sum(have & seen[:, c])), c) for c in range(C) if posed[c] is None]
+        n, c = max(cand)
+        if n < min_frames // 2:
+            names = [cams0[k].name for k in range(C) if posed[k] is None]
+            raise CalibrateError(f"camera(s) {names} share too few wand frames ({n}) with the calibrated cameras")
+        fr = np.flatnonzero(have & seen[:, c])
+        obj = np.concatenate([pts[fr].reshape(-1, 3), pts[fr].reshape(-1, 3)])
+        img = np.concatenate([xy[fr, c].reshape(-1, 2), xy[fr, c][:, ::-1].reshape(-1, 2)])
+        f = cams0[c].matrix[0, 0]
+        ok, rv, tv, inl = cv2.solvePnPRansac(obj, img, np.eye(3), None, iterationsCount=2000,
+                                             reprojectionError=2.0 / f, confidence=0.9999, flags=cv2.SOLVEPNP_EPNP)
+        if not ok or inl is None or len(inl) < 6:
+            raise CalibrateError(f"camera {cams0[c].name}: no consistent pose from {n} shared wand frames")
+        inl = inl.ravel()
+        ok, rv, tv = cv2.solvePnP(obj[inl], img[inl], np.eye(3), None, rv, tv, True, cv2.SOLVEPNP_ITERATIVE)
+        posed[c] = Camera(cams0[c].name, cams0[c].size, cams0[c].matrix.copy(), cams0[c].dist.copy(),
+                          rv.ravel(), tv.ravel())
+        log.info("camera %s: PnP from %d frames, %d/%d inliers", cams0[c].name, n, len(inl), len(obj))
+    cams = [p for p in posed if p is not None]
+    uv, pts, rms = _resolve(cams, uv, symmetric=Kw == 2)
+    cams, pts, rep = _adjust(cams, uv, pts, rms, offsets, int(i), max_error_px)
+    cams = _scale_and_world(cams, pts.reshape(-1, 3))
+    out = CameraRig(cams, dict(rig.metadata))
+    return out, _report(out, uv, offsets, rep)
+
+
+def _adjust(cams, uv, pts, rms, offsets, ref, max_error_px):
+    """Bundle adjustment with the rigid wand; a second pass without outlier observations."""
+    F, C, Kw, _ = uv.shape
+    use = np.isfinite(rms) & (rms < 5 * max_error_px)
+    for it in range(2):
+        fr = np.flatnonzero(use)
+        vis = np.all(np.isfinite(uv[fr]), axis=-1)  # (n, C, K)
+        fi, ci, ki = np.nonzero(vis)
+        obs = Observations(ci, fi * Kw + ki, uv[fr][fi, ci, ki])
+        res = bundle_adjust(cams, obs, pts[fr].reshape(-1, 3), wand_offsets=offsets, fixed=(ref,),
+                            f_scale=1.0 if it == 0 else max_error_px)
+        cams = res.cameras
+        pts = np.full((F, Kw, 3), np.nan)
+        pts[fr] = res.points.reshape(-1, Kw, 3)
+        err = np.linalg.norm(res.residuals, axis=1)
+        bad = err > max_error_px
+        if it == 0 and bad.any():
+            # drop whole views with an outlier marker (mislabelled or merged) and re-run
+            for f_, c_ in set(zip(fr[fi[bad]], ci[bad])):
+                uv[f_, c_] = np.nan
+            cnt = np.sum(np.all(np.isfinite(uv), axis=(2, 3)), axis=1)
+            use &= cnt >= 2
+            log.info("dropped %d outlier observations (> %.1f px)", int(bad.sum()), max_error_px)
+        else:
+            break
+    rep = {"obs": obs, "residuals": res.residuals, "frames": fr}
+    return cams, pts, rep
+
+
+def _coverage(points: np.ndarray, cell: float = 0.5, half: float = 2.0, height: float = 2.0) -> float:
+    """Fraction of cells of the [-half, half]^2 x [0, height] volume holding a point (N, 3)."""
+    nx, nz = int(round(2 * half / cell)), int(round(height / cell))
+    idx = np.floor((points + [half, half, 0.0]) / cell).astype(int)
+    ok = np.all((idx >= 0) & (idx < [nx, nx, nz]), axis=1)
+    cells = {tuple(r) for r in idx[ok]}
+    return len(cells) / (nx * nx * nz)
+
+
+def _report(rig: CameraRig, uv: np.ndarray, offsets: np.ndarray, rep: dict) -> WandReport:
+    obs, r = rep["obs"], rep["residuals"]
+    names = rig.names
+    e2 = np.sum(r * r, axis=1)
+    rms = {n: float(np.sqrt(np.mean(e2[obs.cam == c]))) if np.any(obs.cam == c) else float("nan")
+           for c, n in enumerate(names)}
+    nobs = {n: int(np.sum(obs.cam == c)) for c, n in enumerate(names)}
+    F, C, Kw, _ = uv.shape
+    fr = rep["frames"]
+    res = Triangulator(rig, TriangulateConfig(max_error_px=1e9, iterations=3)).triangulate(
+        uv[fr].transpose(1, 0, 2, 3).reshape(C, -1, 2))
+    P = res.points.reshape(len(fr), Kw, 3)
+    lengths = np.linalg.norm(P[:, -1] - P[:, 0], axis=1)
+    lengths = lengths[np.isfinite(lengths)]
+    seen = np.all(np.isfinite(uv[fr]), axis=(2, 3))
+    cov, pairs = {}, {}
+    for a, b in itertools.combinations(range(C), 2):
+        both = seen[:, a] & seen[:, b]
+        key = f"{names[a]}-{names[b]}"
+        pairs[key] = int(both.sum())
+        pts = P[both].reshape(-1, 3)
+        cov[key] = _coverage(pts[np.all(np.isfinite(pts), axis=1)])
+    return WandReport(rms, nobs, float(np.mean(lengths)), float(np.std(lengths)), len(fr), cov, pairs)
+
+
+__all__ = ["CalibrateError", "WandReport", "calibrate_wand", "normalized", "rotation_to_rvec"]

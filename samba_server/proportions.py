@@ -1,0 +1,79 @@
+"""Subject proportions: the 8 bone lengths of the person in a take.
+
+Observed directly by the markers: shoulder width, shin, and the whole arm (shoulder–wrist when
+the arm is straight). Not observed: the split of the arm into upper arm and forearm, the hips
+(so torso, thigh and hip width) and the head (neck). Those come from the database's
+proportions as a prior, scaled by what the take shows:
+
+- upper arm + forearm = a high percentile of the shoulder–wrist distance, split in the database
+  ratio;
+- torso + thigh = a high percentile of the shoulder-midpoint–knee distance (upright, legs
+  straight: the standard pose at the start of every take), split in the database ratio after
+  removing the sideways hip offset;
+- hip width and neck = database value × the mean scale of the observed bones.
+
+:func:`estimate_lengths` does this on a whole take (or its first second live); the
+reconstructor's whole-take refinement (:func:`samba_server.reconstruct.refine_lengths`) then
+adjusts the unobserved split with the evidence of every frame.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from samba_common.body import L
+from samba_common.skeleton import M
+
+log = logging.getLogger(__name__)
+
+
+class ProportionError(ValueError):
+    """The take does not show enough of the body to estimate its proportions."""
+
+
+def _dist(markers: np.ndarray, a: str, b: str) -> np.ndarray:
+    return np.linalg.norm(markers[:, M[a]] - markers[:, M[b]], axis=-1)
+
+
+def _robust(values: np.ndarray, q: float | None = None) -> float:
+    v = values[np.isfinite(values)]
+    if v.size == 0:
+        return float("nan")
+    return float(np.median(v) if q is None else np.percentile(v, q))
+
+
+def estimate_lengths(markers: np.ndarray, db_lengths: np.ndarray, straight_percentile: float = 97.0) -> np.ndarray:
+    """Bone lengths (8,) metres of the subject in ``markers`` (F, 8, 3) (NaN = missing).
+
+    db_lengths: (8,) the database body's lengths, used as the proportion prior.
+    Raises ProportionError when shoulders, shins or arms are never seen.
+    """
+    db = np.asarray(db_lengths, dtype=float)
+    sw = _robust(_dist(markers, "left_shoulder", "right_shoulder"))
+    shin = _robust(np.concatenate([_dist(markers, "left_knee", "left_ankle"), _dist(markers, "right_knee", "right_ankle")]))
+    arm = _robust(np.concatenate([_dist(markers, "left_shoulder", "left_wrist"),
+                                  _dist(markers, "right_shoulder", "right_wrist")]), straight_percentile)
+    mid = 0.5 * (markers[:, M["left_shoulder"]] + markers[:, M["right_shoulder"]])
+    reach = _robust(np.concatenate([np.linalg.norm(mid - markers[:, M["left_knee"]], axis=-1),
+                                    np.linalg.norm(mid - markers[:, M["right_knee"]], axis=-1)]), straight_percentile)
+    missing = [n for n, v in (("shoulder width", sw), ("shin", shin), ("arm", arm), ("shoulder-knee", reach)) if not np.isfinite(v)]
+    if missing:
+        raise ProportionError(f"cannot estimate proportions: never seen: {', '.join(missing)}")
+    out = db.copy()
+    out[L["shoulder_width"]] = sw
+    out[L["shin"]] = shin
+    db_arm = db[L["upper_arm"]] + db[L["forearm"]]
+    out[L["upper_arm"]] = arm * db[L["upper_arm"]] / db_arm
+    out[L["forearm"]] = arm * db[L["forearm"]] / db_arm
+    scale = np.exp(np.mean(np.log([sw / db[L["shoulder_width"]], shin / db[L["shin"]], arm / db_arm])))
+    half_hip = 0.5 * db[L["hip_width"]] * scale
+    vertical = np.sqrt(max(reach**2 - half_hip**2, (0.5 * reach) ** 2))
+    db_leg = db[L["torso"]] + db[L["thigh"]]
+    out[L["torso"]] = vertical * db[L["torso"]] / db_leg
+    out[L["thigh"]] = vertical * db[L["thigh"]] / db_leg
+    out[L["hip_width"]] = db[L["hip_width"]] * scale
+    out[L["neck"]] = db[L["neck"]] * scale
+    log.debug("estimated lengths %s (scale %.3f)", np.round(out, 4), scale)
+    return out

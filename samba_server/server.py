@@ -1,0 +1,292 @@
+"""The Samba server core: ingest -> sync -> triangulate (+ swap repair) -> solve -> publish.
+
+:class:`Server` has no network code. Transports call :meth:`Server.ingest` (thread-safe; it
+stamps the arrival time, records the raw packet and queues it) and
+:meth:`Server.mote_event`; the processing loop (:meth:`Server.run` in a thread, or
+:meth:`Server.process_pending` from the caller) handles the queue strictly in order. Every
+decision depends only on the queued items and their arrival stamps, so feeding a recorded
+take back through :meth:`ingest` with the recorded stamps reproduces the live poses exactly
+(:mod:`samba_server.replay`). The Zenoh wiring lives in :mod:`samba_server.live`.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from samba_common.calib import CameraRig
+from samba_common.pose_wire import FLAG_INCOMPLETE, FLAG_SOLVED, FLAG_SWAP_REPAIRED, PoseMessage, encode_pose
+from samba_common.skeleton import N_JOINTS, N_MARKERS
+from samba_common.wire import PacketError, decode_packet
+
+from .record import Recorder
+from .swap import SwapConfig, repair_one_swap
+from .sync import FrameSync, SyncConfig, SyncPacket
+from .triangulate import TriangulateConfig, Triangulator
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ServerConfig:
+    """``[server]`` settings."""
+
+    queue_size: int = 8192  #: packets waiting for processing; beyond it packets are dropped (counted)
+    idle_poll_ms: float = 2.0  #: processing loop wake-up when no packet arrives
+    keep_history: bool = True  #: keep every pose (for --export and tests)
+    drop_merged: bool = True  #: blobs flagged merged are treated as unseen
+    max_lag_ms: float = 0.0  #: live only: skip the skeleton solve of frames older than this (0 = never)
+
+
+@dataclass
+class ServerStats:
+    """Counters of one server run (all monotonically increasing)."""
+
+    packets: int = 0
+    bad_packets: int = 0
+    unknown_motes: int = 0
+    queue_overflow: int = 0
+    frames: int = 0
+    solved: int = 0
+    swaps_repaired: int = 0
+    solve_skipped: int = 0
+    mote_packets: dict[str, int] = field(default_factory=dict)
+    latency_ms: list[float] = field(default_factory=list)
+
+
+PublishFn = Callable[[PoseMessage], None]
+
+
+class Server:
+    """See the module docstring. ``reconstructor``: an object with ``solve(markers (8,3), t)``
+    returning ``.joints`` (13,3), ``.residual``, ``.n_markers`` (or None: markers only)."""
+
+    def __init__(self, rig: CameraRig, calibration_toml: bytes | None = None, reconstructor=None,
+                 config: ServerConfig | None = None, sync_config: SyncConfig | None = None,
+                 tri_config: TriangulateConfig | None = None, swap_config: SwapConfig | None = None,
+                 recorder: Recorder | None = None, publish: PublishFn | None = None,
+                 clock: Callable[[], int] = time.time_ns):
+        self.rig = rig
+        self.calibration_toml = calibration_toml if calibration_toml is not None else rig.dumps().encode()
+        self.config = config or ServerConfig()
+        self.sync = FrameSync(sync_config)
+        self.triangulator = Triangulator(rig, tri_config)
+        self.swap_config = swap_config or SwapConfig()
+        self.reconstructor = reconstructor
+        self.recorder = recorder
+        self.publish = publish
+        self.clock = clock
+        self.stats = ServerStats()
+        self.poses: list[PoseMessage] = []
+        self._cam_index = {name: i for i, name in enumerate(rig.names)}
+        self._queue: queue.Queue = queue.Queue(self.config.queue_size)
+        self._lock = threading.Lock()
+        self._seq = 0
+        self._ingested = 0
+        self.last_arrival_ns = 0
+        self._t0_ns: int | None = None
+        self._unknown_logged: set[str] = set()
+        #: callables(MarkerPacket) called with every decoded packet (e.g. the viewer's blobs)
+        self.packet_listeners: list[Callable] = []
+        #: callables(PoseMessage) called with every pose after ``publish``
+        self.pose_listeners: list[Callable] = []
+        if recorder is not None:
+            recorder.write_calibration(self.calibration_toml, clock())
+
+    # ------------------------------------------------------------------ thread-safe inputs
+    def ingest(self, mote_id: str, payload: bytes, arrival_ns: int | None = None) -> bool:
+        """Queue one raw marker packet from ``mote_id`` (any thread). False if dropped."""
+        with self._lock:
+            t = self.clock() if arrival_ns is None else int(arrival_ns)
+            self.last_arrival_ns = t
+            if self.recorder is not None:
+                self.recorder.write_packet(mote_id, payload, t, seq=self._ingested)
+            self._ingested += 1
+            try:
+                self._queue.put_nowait(("packet", mote_id, payload, t))
+            except queue.Full:
+                self.stats.queue_overflow += 1
+                return False
+            return True
+
+    def mote_event(self, mote_id: str, joined: bool, t_ns: int | None = None) -> None:
+        """A mote's liveliness token appeared (joined) or vanished (any thread)."""
+        with self._lock:
+            t = self.clock() if t_ns is None else int(t_ns)
+            if self.recorder is not None:
+                ev = {"mote_id": mote_id, "event": "join" if joined else "leave", "t_ns": t}
+                self.recorder.write_event(json.dumps(ev).encode(), t)
+            self._queue.put(("join" if joined else "leave", mote_id, b"", t))
+
+    # ------------------------------------------------------------------ processing
+    def process_pending(self, timeout: float | None = None, stop: threading.Event | None = None) -> list[PoseMessage]:
+        """Handle every queued item in order (waiting up to ``timeout`` s for the first).
+
+        When the queue is empty, advance the sync clock to now so that frames waiting for a
+        dead mote are released (only packets stamped later than now can still arrive).
+        """
+        out: list[PoseMessage] = []
+        try:
+            item = self._queue.get(timeout=timeout) if timeout else self._queue.get_nowait()
+        except queue.Empty:
+            item = None
+        while item is not None:
+            out += self._handle(item)
+            if stop is not None and stop.is_set():
+                return out
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                item = None
+        if timeout:
+            with self._lock:
+                if self._queue.empty():
+                    now = self.clock()
+                else:
+                    now = None
+            if now is not None:
+                out += [self._frame(f) for f in self.sync.poll(now)]
+        return out
+
+    def run(self, stop: threading.Event) -> None:
+        """Processing loop until ``stop`` is set; never raises on bad data."""
+        wait = self.config.idle_poll_ms / 1000.0
+        while not stop.is_set():
+            try:
+                self.process_pending(timeout=wait, stop=stop)
+            except Exception:  # a bug must not kill the live stream: log it and go on
+                log.exception("processing error (frame skipped)")
+
+    def finish(self) -> list[PoseMessage]:
+        """Process what is queued, then emit every pending frame (end of stream)."""
+        out = self.process_pending()
+        out += [self._frame(f) for f in self.sync.flush()]
+        return out
+
+    def _handle(self, item) -> list[PoseMessage]:
+        kind, mote_id, payload, t = item
+        if kind == "join":
+            log.info("mote %s joined", mote_id)
+            self.sync.mote_joined(mote_id, t)
+            return []
+        if kind == "leave":
+            log.info("mote %s left", mote_id)
+            return [self._frame(f) for f in self.sync.mote_left(mote_id)]
+        self.stats.packets += 1
+        try:
+            pkt = decode_packet(payload)
+        except PacketError as exc:
+            self.stats.bad_packets += 1
+            log.debug("bad packet from %s dropped: %s", mote_id, exc)
+            return [self._frame(f) for f in self.sync.poll(t)]
+        if pkt.mote_id not in self._cam_index:
+            self.stats.unknown_motes += 1
+            if pkt.mote_id not in self._unknown_logged:
+                self._unknown_logged.add(pkt.mote_id)
+                log.warning("packets from mote %r, which is not in the calibration (%s): dropped",
+                            pkt.mote_id, ", ".join(self.rig.names))
+            return [self._frame(f) for f in self.sync.poll(t)]
+        self.stats.mote_packets[pkt.mote_id] = self.stats.mote_packets.get(pkt.mote_id, 0) + 1
+        for fn in self.packet_listeners:
+            try:
+                fn(pkt)
+            except Exception:
+                log.exception("packet listener failed")
+        frames = self.sync.push(SyncPacket(pkt.mote_id, pkt.seq, pkt.t_ns, t, pkt))
+        return [self._frame(f) for f in frames]
+
+    def markers_for(self, frame) -> tuple[np.ndarray, int, bool]:
+        """Triangulated markers of a frame: ((8, 3) world m NaN = missing, marker mask, swap repaired)."""
+        C = len(self.rig.names)
+        uv = np.full((C, N_MARKERS, 2), np.nan)
+        for mote_id, sp in frame.packets.items():
+            uv[self._cam_index[mote_id]] = sp.payload.labelled_uv(N_MARKERS, True, self.config.drop_merged)
+        repaired = False
+        res = self.triangulator.triangulate(uv)
+        if self.swap_config.enabled:
+            seen = np.isfinite(uv).all(axis=2)
+            suspicious = np.nanmax(res.error, initial=0.0) > self.swap_config.gate_px or \
+                bool((seen & ~res.used).any())
+            if suspicious:
+                fixed, view = repair_one_swap(self.rig, uv, lambda u: self.triangulator.triangulate(u).points,
+                                              self.swap_config)
+                if view is not None:
+                    repaired = True
+                    self.stats.swaps_repaired += 1
+                    res = self.triangulator.triangulate(fixed)
+        pts = res.points
+        mask = int(sum(1 << i for i in range(N_MARKERS) if np.isfinite(pts[i]).all()))
+        return pts, mask, repaired
+
+    def _frame(self, frame) -> PoseMessage:
+        self.stats.frames += 1
+        markers, mask, repaired = self.markers_for(frame)
+        if self._t0_ns is None:
+            self._t0_ns = frame.t_ns
+        t = (frame.t_ns - self._t0_ns) / 1e9
+        joints = np.full((N_JOINTS, 3), np.nan)
+        residual, flags = float("nan"), 0
+        lag_ms = (self.clock() - frame.t_ns) / 1e6
+        skip = self.config.max_lag_ms > 0 and lag_ms > self.config.max_lag_ms
+        if skip:
+            self.stats.solve_skipped += 1
+        if self.reconstructor is not None and not skip:
+            try:
+                r = self.reconstructor.solve(markers, t)
+                joints = np.asarray(r.joints, float)
+                residual = float(r.residual)
+            except Exception:
+                log.exception("solver failed on frame t=%.3f s (frame left unsolved)", t)
+            if np.isfinite(joints).all():
+                flags |= FLAG_SOLVED
+                self.stats.solved += 1
+        if not frame.complete:
+            flags |= FLAG_INCOMPLETE
+        if repaired:
+            flags |= FLAG_SWAP_REPAIRED
+        msg = PoseMessage(seq=self._seq, t_ns=frame.t_ns, joints=joints, residual_m=residual,
+                          n_markers=bin(mask).count("1"), n_views=len(frame.packets), flags=flags,
+                          markers=markers, marker_mask=mask)
+        self._seq += 1
+        msg.latency_ms = (self.clock() - frame.t_ns) / 1e6
+        self.stats.latency_ms.append(msg.latency_ms)
+        if len(self.stats.latency_ms) > 100_000:
+            del self.stats.latency_ms[:50_000]
+        if self.config.keep_history:
+            self.poses.append(msg)
+        if self.publish is not None:
+            try:
+                self.publish(msg)
+            except Exception:
+                log.exception("publishing pose %d failed", msg.seq)
+        for fn in self.pose_listeners:
+            try:
+                fn(msg)
+            except Exception:
+                log.exception("pose listener failed")
+        recorder = self.recorder
+        if recorder is not None:
+            recorder.write_pose(encode_pose(msg), self.clock(), frame.t_ns, msg.seq)
+        return msg
+
+    def set_recorder(self, recorder: Recorder | None) -> Recorder | None:
+        """Start (or stop, with None) recording while running; returns the previous recorder."""
+        with self._lock:
+            old, self.recorder = self.recorder, recorder
+            if recorder is not None:
+                recorder.write_calibration(self.calibration_toml, self.clock())
+        return old
+
+    def joints_array(self) -> tuple[np.ndarray, np.ndarray]:
+        """History as ((F, 13, 3) joints, (F,) seconds since the first frame)."""
+        if not self.poses:
+            return np.zeros((0, N_JOINTS, 3)), np.zeros(0)
+        t0 = self.poses[0].t_ns
+        return (np.stack([p.joints for p in self.poses]), np.array([(p.t_ns - t0) / 1e9 for p in self.poses]))

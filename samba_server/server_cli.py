@@ -1,0 +1,247 @@
+"""``samba-server``: the live server (Zenoh in, poses out), plus helpers shared by the other
+server CLIs (config loading, logging, building a :class:`Server`, the status line)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from importlib.resources import files
+from pathlib import Path
+
+import numpy as np
+
+from samba_common import zenoh_util as zk
+from samba_common.calib import CalibrationError, CameraRig
+from samba_common.config import ConfigError, from_dict, read_toml
+
+from .record import Recorder, RecorderError
+from .server import Server, ServerConfig
+from .swap import SwapConfig
+from .sync import SyncConfig
+from .triangulate import TriangulateConfig
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ServerConfigs:
+    """All tables of configs/server.toml."""
+
+    server: ServerConfig
+    sync: SyncConfig
+    triangulate: TriangulateConfig
+    swap: SwapConfig
+
+
+def default_config_path() -> Path:
+    """The packaged configs/server.toml."""
+    return Path(str(files("samba_configs").joinpath("server.toml")))
+
+
+def load_server_configs(path: str | os.PathLike | None = None, **sync_overrides) -> ServerConfigs:
+    """Load configs/server.toml (default: the packaged one); raise ConfigError on bad keys."""
+    p = Path(path) if path is not None else default_config_path()
+    data = read_toml(p) if p.exists() else {}
+    sync = dict(data.get("sync", {}))
+    sync.update({k: v for k, v in sync_overrides.items() if v is not None})
+    return ServerConfigs(
+        server=from_dict(ServerConfig, data.get("server", {}), f"{p} [server]"),
+        sync=from_dict(SyncConfig, sync, f"{p} [sync]"),
+        triangulate=from_dict(TriangulateConfig, data.get("triangulate", {}), f"{p} [triangulate]"),
+        swap=from_dict(SwapConfig, data.get("swap", {}), f"{p} [swap]"),
+    )
+
+
+def setup_logging(verbose: int) -> None:
+    """WARNING by default, INFO with -v, DEBUG with -vv."""
+    level = logging.WARNING if verbose <= 0 else logging.INFO if verbose == 1 else logging.DEBUG
+    logging.basicConfig(level=level, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:
+        import zenoh
+
+        zenoh.init_log_from_env_or("error")
+    except Exception:  # pragma: no cover
+        pass
+
+
+def make_reconstructor(db_path: str | None):
+    """A Reconstructor with the motion DB at ``db_path`` (or the shipped one)."""
+    from .reconstruct import Reconstructor
+
+    db = None
+    if db_path:
+        from .db import MotionDB
+
+        db = MotionDB.load(db_path)
+    return Reconstructor(db=db)
+
+
+def build_server(calibration: str | os.PathLike, configs: ServerConfigs, db: str | None = None,
+                 record: str | None = None, live: bool = True) -> Server:
+    """Load the calibration and build a Server (raises CalibrationError / RecorderError)."""
+    toml = Path(calibration).read_bytes()
+    rig = CameraRig.load(calibration)
+    server_cfg = configs.server
+    if not live and server_cfg.max_lag_ms:
+        server_cfg = ServerConfig(**{**server_cfg.__dict__, "max_lag_ms": 0.0})
+    recorder = Recorder(record, metadata={"tool": "samba-server"}) if record else None
+    return Server(rig, calibration_toml=toml, reconstructor=make_reconstructor(db), config=server_cfg,
+                  sync_config=configs.sync, tri_config=configs.triangulate, swap_config=configs.swap,
+                  recorder=recorder)
+
+
+def export_joints(server: Server, path: str | os.PathLike) -> int:
+    """Write the server's pose history as joints.npz (extra keys: t_ns, residual, n_markers,
+    markers). Returns the number of frames."""
+    from samba_common.formats import save_joints
+
+    joints, t = server.joints_array()
+    poses = server.poses
+    save_joints(path, joints, t, t_ns=np.array([p.t_ns for p in poses], dtype=np.int64),
+                residual=np.array([p.residual_m for p in poses]), n_markers=np.array([p.n_markers for p in poses]),
+                markers=np.stack([p.markers for p in poses]) if poses else np.zeros((0, 8, 3)))
+    return len(poses)
+
+
+class Status:
+    """Rolling figures for the status line / viewer panel: fps, latency, motes alive, drops."""
+
+    def __init__(self, server: Server, alive: set[str] | None = None):
+        self.server = server
+        self.alive = alive
+        self._last = (time.monotonic(), 0)
+
+    def snapshot(self) -> dict:
+        s = self.server
+        now = time.monotonic()
+        t0, f0 = self._last
+        frames = s.stats.frames
+        fps = (frames - f0) / max(now - t0, 1e-6)
+        self._last = (now, frames)
+        lat = s.stats.latency_ms[-120:]
+        late = sum(m.late for m in s.sync.motes.values())
+        alive = sorted(self.alive) if self.alive is not None else s.sync.alive()
+        return {"fps": round(fps, 1), "latency_ms": round(float(np.median(lat)), 2) if lat else None,
+                "motes_alive": len(alive), "motes": {m: {"alive": m in alive, "packets": s.stats.mote_packets.get(m, 0),
+                                                          "late": s.sync.motes[m].late if m in s.sync.motes else 0}
+                                                      for m in sorted(set(s.rig.names) | set(alive))},
+                "frames": frames, "solved": s.stats.solved,
+                "drops": s.stats.bad_packets + s.stats.unknown_motes + s.stats.queue_overflow + late,
+                "recording": s.recorder is not None}
+
+    @staticmethod
+    def line(snap: dict) -> str:
+        lat = "-" if snap["latency_ms"] is None else f"{snap['latency_ms']:.1f} ms"
+        return (f"fps {snap['fps']:5.1f} | latency {lat:>8} | motes {snap['motes_alive']} alive | "
+                f"frames {snap['frames']} solved {snap['solved']} | drops {snap['drops']}"
+                + (" | REC" if snap["recording"] else ""))
+
+
+def attach_viewer(server: Server, http: str, status: Status):
+    """Start the browser viewer on ``http`` ("PORT" or "HOST:PORT") and feed it."""
+    from .viewer.server import Viewer
+
+    host, _, port = http.rpartition(":")
+    viewer = Viewer(host or "127.0.0.1", int(port))
+
+    def on_pose(msg) -> None:
+        viewer.publish_pose(msg.t_ns / 1e9, msg.joints, msg.markers,
+                            {"residual_m": msg.residual_m, "n_markers": msg.n_markers, "latency_ms": msg.latency_ms})
+
+    def on_packet(pkt) -> None:
+        viewer.publish_blobs(pkt.mote_id, pkt.uv, pkt.labels, (pkt.width, pkt.height))
+
+    server.pose_listeners.append(on_pose)
+    server.packet_listeners.append(on_packet)
+    viewer.start()
+    return viewer
+
+
+def add_network_args(ap: argparse.ArgumentParser) -> None:
+    ap.add_argument("--session", default=zk.DEFAULT_SESSION, help="session name (default: %(default)s)")
+    ap.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
+                    help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
+    ap.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                    help="Zenoh endpoint to connect to (repeatable)")
+    ap.add_argument("--scouting", action="store_true", help="enable Zenoh multicast scouting")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="samba-server", description="Live Samba server: mote packets in, skeleton out.")
+    ap.add_argument("--calibration", required=True, help="calibration.toml (camera names = mote ids)")
+    add_network_args(ap)
+    ap.add_argument("--record", metavar="TAKE.mcap", help="record packets, calibration and poses")
+    ap.add_argument("--export", metavar="JOINTS.npz", help="write every pose to joints.npz at exit")
+    ap.add_argument("--db", help="motion database (.npz) for the solver (default: the shipped one)")
+    ap.add_argument("--config", help="server TOML (default: the packaged configs/server.toml)")
+    ap.add_argument("--fps", type=float, help="nominal mote frame rate (overrides [sync] fps)")
+    ap.add_argument("--http", metavar="[HOST:]PORT", help="serve the browser viewer")
+    ap.add_argument("--duration", type=float, help="stop after this many seconds")
+    ap.add_argument("--status", action="store_true", help="print a live status line on stderr")
+    ap.add_argument("-v", "--verbose", action="count", default=0)
+    args = ap.parse_args(argv)
+    setup_logging(args.verbose)
+    try:
+        configs = load_server_configs(args.config, fps=args.fps)
+        server = build_server(args.calibration, configs, args.db, args.record)
+    except (ConfigError, CalibrationError, RecorderError, OSError, ValueError) as exc:
+        print(f"samba-server: {exc}", file=sys.stderr)
+        return 1
+    return run_live(server, args)
+
+
+def run_live(server: Server, args, extra_stop: threading.Event | None = None, on_tick=None) -> int:
+    """Run ``server`` on Zenoh until Ctrl-C, SIGTERM or ``args.duration``; export/close at the end."""
+    from .live import LiveServer
+
+    stop = extra_stop or threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    live = LiveServer(server, session=args.session, listen=args.listen, connect=args.connect,
+                      scouting=args.scouting)
+    status = Status(server, live.alive)
+    viewer = None
+    code = 0
+    try:
+        live.start()
+        if args.http:
+            viewer = attach_viewer(server, args.http, status)
+            print(f"viewer: {viewer.url}", file=sys.stderr)
+        t_end = time.monotonic() + args.duration if args.duration else None
+        while not stop.is_set() and (t_end is None or time.monotonic() < t_end):
+            stop.wait(0.5)
+            snap = status.snapshot()
+            if viewer is not None:
+                viewer.publish_status(snap)
+            if on_tick is not None:
+                on_tick(snap)
+            elif getattr(args, "status", False) and sys.stderr.isatty():
+                sys.stderr.write("\r" + Status.line(snap) + "  ")
+                sys.stderr.flush()
+    except KeyboardInterrupt:
+        pass
+    except Exception as exc:  # zenoh errors (port taken, bad endpoint)
+        print(f"\n{Path(sys.argv[0]).name}: {exc}", file=sys.stderr)
+        code = 1
+    finally:
+        live.close()
+        if viewer is not None:
+            viewer.stop()
+        if server.recorder is not None:
+            server.recorder.close()
+            if server.recorder.stats.dropped:
+                print(f"recording: {server.recorder.stats.dropped} message(s) could not be written "
+                      f"({server.recorder.stats.last_error})", file=sys.stderr)
+        if getattr(args, "export", None):
+            n = export_joints(server, args.export)
+            print(f"\nwrote {n} frames to {args.export}", file=sys.stderr)
+    return code
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,73 @@
+import numpy as np
+import pytest
+
+from samba_common.body import bone_lengths, prepend_standard_pose
+from samba_common.bvh import load_bvh, resample
+from samba_common.skeleton import UNOBSERVED_JOINTS
+from samba_server.db import load_default_db
+from samba_server.evaluate import mpjpe, observe, vary_body
+from samba_server.proportions import ProportionError, estimate_lengths
+from samba_server.reconstruct import Reconstructor, reconstruct_take
+
+
+@pytest.fixture(scope="module")
+def held_out(cmu_dir):
+    """Subject 6's walk on a body unlike the database's, and a database without subject 6."""
+    rng = np.random.default_rng(11)
+    take = load_bvh(cmu_dir / "006_01.bvh")
+    joints, _t = resample(take.joints, take.t, 30.0)
+    truth, lengths = vary_body(joints[:120], rng)
+    truth = prepend_standard_pose(truth, 30.0)
+    t = np.arange(len(truth)) / 30.0
+    db = load_default_db().without(lambda n: n.startswith("006_"))
+    return truth, lengths, t, db, observe(truth, rng)
+
+
+def test_held_out_walk_is_accurate_with_its_own_proportions(held_out):
+    truth, lengths, t, db, markers = held_out
+    est, info = reconstruct_take(markers, t, db)
+    assert est.shape == truth.shape and np.all(info["status"] == "solved")
+    assert mpjpe(est, truth) < 0.025
+    assert mpjpe(est, truth, UNOBSERVED_JOINTS) < 0.045
+    # the subject's proportions, not the database body's
+    got = np.median(bone_lengths(est), axis=0)
+    assert np.all(np.abs(got - lengths)[[0, 7]] < 0.005)            # shoulder width, shin: observed
+    assert abs(got[4] + got[5] - lengths[4] - lengths[5]) < 0.015     # whole arm: observed when straight
+    assert np.ptp(bone_lengths(est), axis=0).max() < 1e-6         # lengths fixed over the take
+
+
+def test_missing_markers_short_gaps_bridged_long_gaps_nan(held_out):
+    truth, _lengths, t, db, markers = held_out
+    m = markers.copy()
+    m[70:73] = np.nan          # 0.1 s: bridged by the temporal model
+    m[100:125] = np.nan        # 0.83 s: too long, NaN after max_gap
+    m[130, [0, 2, 4]] = np.nan  # a few markers missing: still solved
+    est, info = reconstruct_take(m, t, db)
+    assert len(est) == len(t)
+    assert list(info["status"][70:73]) == ["bridged"] * 3
+    assert np.all(np.isfinite(est[70:73])) and mpjpe(est[70:73], truth[70:73]) < 0.08
+    assert np.all(np.isnan(est[112:125])) and set(info["status"][112:125]) == {"unsolved"}
+    assert info["status"][130] == "solved" and mpjpe(est[130:131], truth[130:131]) < 0.05
+    assert np.all(np.isfinite(est[128:]))  # recovers after the gap
+
+
+def test_live_solver_estimates_the_body_from_the_standard_pose(held_out):
+    truth, lengths, t, db, markers = held_out
+    rec = Reconstructor(db)
+    out = np.array([rec.solve(markers[i], t[i]).joints for i in range(len(t))])
+    assert rec.lengths is not None and abs(rec.lengths[7] - lengths[7]) < 0.01
+    assert mpjpe(out[40:], truth[40:]) < 0.03
+
+
+def test_solve_is_deterministic(held_out):
+    _truth, lengths, t, db, markers = held_out
+    a = [Reconstructor(db, lengths=lengths).solve(markers[i], t[i]).joints for i in range(3)]
+    rec = Reconstructor(db, lengths=lengths)
+    b = [rec.solve(markers[i], t[i]).joints for i in range(3)]
+    np.testing.assert_array_equal(a[0], b[0])
+
+
+def test_take_without_enough_body_is_a_clear_error():
+    m = np.full((10, 8, 3), np.nan)
+    with pytest.raises(ProportionError, match="never seen"):
+        estimate_lengths(m, load_default_db().mean_lengths)

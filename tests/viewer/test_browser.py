@@ -1,0 +1,58 @@
+"""The page in a real headless Chromium: poses arrive (DOM counter) and it renders (screenshot).
+
+Needs Debian's chromium (``apt-get install -y chromium``); skipped with that reason otherwise.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from .conftest import Publisher
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="chromium not installed (apt-get install -y chromium)")
+
+
+def chromium(tmp_path, url: str, *args: str, budget_ms: int = 3000) -> subprocess.CompletedProcess:
+    profile = tmp_path / "chromium-profile"
+    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+           "--disable-component-update", "--disable-sync", "--no-first-run", f"--user-data-dir={profile}",
+           "--window-size=1280,760", f"--virtual-time-budget={budget_ms}", *args, url]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=90)
+
+
+def test_poses_arrive_in_the_page(tmp_path, viewer):
+    with Publisher(viewer, seconds=30.0) as pub:
+        proc = chromium(tmp_path, viewer.url, "--dump-dom")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    body = re.search(r"<body[^>]*>", proc.stdout).group(0)
+    poses = int(re.search(r'data-poses="(\d+)"', body).group(1))
+    assert 'data-connected="1"' in body
+    assert poses >= 10, f"only {poses} poses reached the page (published {pub.count})"
+    assert re.search(r'id="pose-count">(\d+)<', proc.stdout).group(1) == str(poses)
+    # status panel and one blob view per mote were filled in
+    assert re.search(r'id="st-alive">1 / 2<', proc.stdout)
+    assert re.search(r'data-mote="cam0"[^>]*data-blobs="8"', proc.stdout)
+    assert 'data-mote="cam1"' in proc.stdout
+
+
+def test_screenshot_shows_the_skeleton(tmp_path, viewer):
+    import matplotlib.image as mpimg
+
+    shot = tmp_path / "viewer.png"
+    with Publisher(viewer, seconds=30.0):
+        proc = chromium(tmp_path, viewer.url, f"--screenshot={shot}", budget_ms=4000)
+    assert proc.returncode == 0 and shot.exists(), proc.stderr[-2000:]
+    img = mpimg.imread(shot)[..., :3]
+    assert img.shape[:2] == (760, 1280)
+    view = img[60:700, 300:600]  # the 3D view around the subject
+    bright = (view.mean(axis=-1) > 0.6).sum()  # joints/bones on the dark background
+    assert bright > 200, "no skeleton drawn in the 3D view"
+    orange = ((view[..., 0] > 0.5) & (view[..., 2] < 0.35) & (view[..., 1] > 0.25)).sum()
+    assert orange > 20, "no markers drawn"
+    assert np.std(img) > 0.05
