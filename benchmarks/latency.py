@@ -85,7 +85,7 @@ def main() -> int:
     for fps in (60, 120, 180, 240, 360):
         r = run(4, float(fps), args.seconds, False)
         print(r, flush=True)
-        if r["frames"] >= 0.95 * r["expected"] and not r["growing"]:
+        if r["frames"] >= 0.95 * r["expected"] and not r["growing"] and r["late"] <= 0.01 * 4 * r["expected"]:
             best = fps
         else:
             break

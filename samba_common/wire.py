@@ -18,7 +18,8 @@ Marker packet, version 1, little endian (defined only here; FORMATS.md is the co
 
 ``label`` is an index into ``MARKER_NAMES`` (0..7) or :data:`UNLABELLED` (255); ``flags`` is
 a bit set of :data:`FLAG_TRACKED`, :data:`FLAG_PREDICTED`, :data:`FLAG_LOST`,
-:data:`FLAG_MERGED`. A predicted or lost record carries the tracker's predicted position
+:data:`FLAG_MERGED` (and :data:`FLAG_UNCERTAIN` on unlabelled records of markers the tracker
+follows but whose identity it is not sure of, e.g. after two markers crossed). A predicted or lost record carries the tracker's predicted position
 (or NaN when it has none) and area 0: it was *not* measured in this frame.
 """
 
@@ -44,7 +45,9 @@ FLAG_TRACKED = 0x01  #: measured this frame and matched to its track
 FLAG_PREDICTED = 0x02  #: not measured this frame; position is the tracker's prediction
 FLAG_LOST = 0x04  #: not seen for longer than the coast time; identity kept for re-acquisition
 FLAG_MERGED = 0x08  #: measured blob holds two or more markers; its centroid is biased
-FLAG_NAMES = {FLAG_TRACKED: "tracked", FLAG_PREDICTED: "predicted", FLAG_LOST: "lost", FLAG_MERGED: "merged"}
+FLAG_UNCERTAIN = 0x10  #: on an unlabelled record: a tracked marker whose identity is in doubt
+FLAG_NAMES = {FLAG_TRACKED: "tracked", FLAG_PREDICTED: "predicted", FLAG_LOST: "lost", FLAG_MERGED: "merged",
+              FLAG_UNCERTAIN: "uncertain"}
 
 
 class PacketError(ValueError):

@@ -35,7 +35,7 @@ class DetectConfig:
     threshold_mode: str = "auto"  #: "auto" or "fixed"
     threshold: int = 128  #: fixed threshold (grey level), also the start value in auto mode
     auto_sigmas: float = 8.0  #: auto: at least background + this many noise sigmas
-    auto_fraction: float = 0.35  #: auto: at least background + this fraction of (max - background)
+    auto_fraction: float = 0.45  #: auto: at least background + this fraction of (max - background)
     auto_min: int = 30
     auto_max: int = 230
     auto_every: int = 15  #: auto: refresh the statistics every this many frames
@@ -178,17 +178,43 @@ class Detector:
         h, w = img.shape
         floor = int(min(self.background + cfg.floor_sigmas * self.noise, thr - 1))
         pad = cfg.pad
-        rows = []
+        boxes = []
         for c in contours:
             x, y, bw, bh = cv2.boundingRect(c)
             if bw * bh < cfg.min_area or max(bw, bh) > cfg.max_aspect * min(bw, bh) + 1:
                 continue
-            area = cv2.countNonZero(binary[y:y + bh, x:x + bw])
+            boxes.append((x, y, bw, bh, int(c[0, 0, 0]), int(c[0, 0, 1])))
+        if not boxes:
+            return Detections.empty(thr)
+        bx = np.asarray(boxes)
+        # padded ROIs that reach into another blob's box need per-pixel ownership
+        x0s, y0s = bx[:, 0] - pad, bx[:, 1] - pad
+        x1s, y1s = bx[:, 0] + bx[:, 2] + pad, bx[:, 1] + bx[:, 3] + pad
+        crowded = np.zeros(len(bx), bool)
+        if len(bx) > 1:
+            ov = ((x0s[:, None] < bx[None, :, 0] + bx[None, :, 2]) & (bx[None, :, 0] < x1s[:, None])
+                  & (y0s[:, None] < bx[None, :, 1] + bx[None, :, 3]) & (bx[None, :, 1] < y1s[:, None]))
+            np.fill_diagonal(ov, False)
+            crowded = ov.any(axis=1)
+        labels = cv2.connectedComponents(binary, connectivity=8)[1] if crowded.any() else None
+        kernel = np.ones((2 * pad + 1, 2 * pad + 1), np.uint8)
+        rows = []
+        for (x, y, bw, bh, px, py), crowd in zip(boxes, crowded):
+            x0, y0 = max(x - pad, 0), max(y - pad, 0)
+            x1, y1 = min(x + bw + pad, w), min(y + bh + pad, h)
+            roi = img[y0:y1, x0:x1]
+            weights = cv2.subtract(roi, floor)
+            if crowd and labels is not None:
+                lab = labels[y0:y1, x0:x1]
+                own = (lab == labels[py, px]).astype(np.uint8)
+                area = int(own.sum())
+                near = cv2.dilate(own, kernel) & ((lab == 0) | (own > 0)).astype(np.uint8)
+                weights = weights * near
+            else:
+                area = cv2.countNonZero(binary[y:y + bh, x:x + bw])
             if area < cfg.min_area or area > cfg.max_area or area < cfg.min_fill * bw * bh:
                 continue
-            x0, y0 = max(x - pad, 0), max(y - pad, 0)
-            roi = img[y0:min(y + bh + pad, h), x0:min(x + bw + pad, w)]
-            m = cv2.moments(cv2.subtract(roi, floor))
+            m = cv2.moments(weights)
             if m["m00"] <= 0:
                 continue
             m00 = m["m00"]

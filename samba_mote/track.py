@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from samba_common.skeleton import N_MARKERS
-from samba_common.wire import FLAG_LOST, FLAG_MERGED, FLAG_PREDICTED, FLAG_TRACKED, UNLABELLED
+from samba_common.wire import FLAG_LOST, FLAG_MERGED, FLAG_PREDICTED, FLAG_TRACKED, FLAG_UNCERTAIN, UNLABELLED
 
 log = logging.getLogger(__name__)
 
@@ -38,8 +38,8 @@ L_SH, R_SH, L_WR, R_WR, L_KN, R_KN, L_AN, R_AN = range(8)
 TPOSE_TEMPLATE = np.array([
     [-0.18, 1.45], [0.18, 1.45],  # shoulders
     [-0.72, 1.45], [0.72, 1.45],  # wrists
-    [-0.14, 0.50], [0.14, 0.50],  # knees (feet apart, see samba_mote.sim.tpose)
-    [-0.18, 0.08], [0.18, 0.08],  # ankles
+    [-0.16, 0.50], [0.16, 0.50],  # knees (feet apart, see samba_mote.sim.tpose)
+    [-0.22, 0.08], [0.22, 0.08],  # ankles
 ])
 
 
@@ -61,8 +61,11 @@ class TrackConfig:
     coast_frames: int = 8  #: frames a missing track is PREDICTED before it becomes LOST
     coast_decay: float = 0.85  #: velocity decay per frame while coasting
     stale_penalty: float = 0.3  #: assignment cost (px) per frame since a track's last clean measurement
-    split_min_px: float = 1.0  #: a merged pair is split along its long axis when this far apart (px)
+    split_min_px: float = 1.5  #: a merged pair is split along its long axis when this far apart (px)
     recheck_every: int = 10  #: look for a T-pose every this many frames and re-label if it disagrees
+    split_margin: float = 1.0  #: px; a split decided by less than this makes both labels uncertain
+    doubt_after_gap: int = 2  #: a track back after more missing frames than this, near another, is uncertain
+    recover_frames: int = 6  #: frames one plausible labelling of uncertain markers must hold
     merge_margin: float = 1.0  #: px added to a blob's radius when testing predictions inside it
     merge_area_ratio: float = 1.35  #: blob area / expected area that means two markers
     reinit_lost: int = 5  #: re-label from a T-pose when at least this many markers are lost
@@ -140,6 +143,16 @@ def label_tpose(uv: np.ndarray, view: str = "front", tolerance: float = 0.06,
         pts = uv[idx]
         # sanity: wrists outside shoulders, knees below the upper group, ankles below knees
         if not (pts[[L_KN, R_KN], 1].min() > pts[:4, 1].max() and pts[[L_AN, R_AN], 1].min() > pts[[L_KN, R_KN], 1].max()):
+            continue
+        # affine invariants of a T-pose: wrists and shoulders on one line, arm span ~4x shoulders
+        span = np.linalg.norm(pts[L_WR] - pts[R_WR])
+        ratio = span / max(float(np.linalg.norm(pts[L_SH] - pts[R_SH])), 1e-6)
+        if not 2.5 <= ratio <= 7.0:
+            continue
+        axis = (pts[L_WR] - pts[R_WR]) / max(span, 1e-6)
+        normal = np.array([-axis[1], axis[0]])
+        off = (pts[:4] - pts[R_WR]) @ normal
+        if np.abs(off).max() > 0.12 * span:
             continue
         r = _affine_residual(TPOSE_TEMPLATE, pts)
         if r <= tolerance and (best is None or r < best[1]):
@@ -220,7 +233,16 @@ class MarkerTracker:
         self.area = np.zeros(N_MARKERS)
         self.missing = np.zeros(N_MARKERS, np.int64)
         self.stale = np.zeros(N_MARKERS, np.int64)  # frames since a clean (unmerged) measurement
-        self.merge_off = np.zeros((N_MARKERS, 2))  # offset from the merged blob's centroid
+        self.certain = np.ones(N_MARKERS, bool)  # identity sure (else published unlabelled)
+        self.partners: list[set[int]] = [set() for _ in range(N_MARKERS)]  # merged with, this episode
+        self.uncertain_events = 0
+        self.unresolved = np.zeros(N_MARKERS, bool)  # merged with no visible separation this episode
+        self.body_h = 0.0  # shoulder-to-ankle height (px) at labelling time
+        self.reach_px = 0.0  # shoulder-to-wrist reach (px)
+        self.shin_px = 0.0  # knee-to-ankle length (px)
+        self._recover_key: tuple | None = None
+        self._recover_streak = 0
+        self.recovered = 0
         self._last_t: int | None = None
         self._frame = 0
         self._init_streak = 0
@@ -255,6 +277,14 @@ class MarkerTracker:
         self.area = area[found[0]].astype(float)
         self.missing[:] = 0
         self.stale[:] = 0
+        self.certain[:] = True
+        self.partners = [set() for _ in range(N_MARKERS)]
+        self.unresolved[:] = False
+        self.body_h = float(pts[[L_AN, R_AN], 1].mean() - pts[[L_SH, R_SH], 1].mean())
+        arms = np.linalg.norm(pts[[L_WR, R_WR]] - pts[[L_SH, R_SH]], axis=1).max()
+        self.reach_px = max(float(arms), 0.40 * self.body_h)
+        self.shin_px = max(float(np.linalg.norm(pts[[L_KN, R_KN]] - pts[[L_AN, R_AN]], axis=1).max()), 0.3 * self.body_h)
+        self._recover_key, self._recover_streak = None, 0
         self.initialised = True
         self._init_streak, self._init_prev = 0, None
         log.info("labelled the 8 markers from a T-pose (%s view, residual %.3f)", self.view, found[1])
@@ -320,6 +350,13 @@ class MarkerTracker:
                     assigned[m] = b
                     merged |= {m, other}
                     break
+        # a blob much larger than its track's single-marker area holds another marker we do not
+        # track right now (lost or never seen): its centroid is biased and its split unsure
+        for m, b in list(assigned.items()):
+            if m not in merged and self.area[m] > 0 and area[b] >= cfg.merge_area_ratio * self.area[m] + 2.0:
+                merged.add(m)
+                self.partners[m].add(-1)
+                self.unresolved[m] = True
         # stage 2: lost tracks re-acquire blobs nobody claimed, nearest first
         if n:
             taken = set(assigned.values())
@@ -329,6 +366,7 @@ class MarkerTracker:
                 if m not in assigned and b not in taken:
                     assigned[m] = b
                     taken.add(b)
+                    self._doubt(m)
         # a merged pair: split the blob along its long axis (second moments), keeping the
         # pair's predicted relative offset to tell which end is which
         sub: dict[int, np.ndarray] = {}
@@ -344,6 +382,10 @@ class MarkerTracker:
                 vu, cuv, vv = (float(x) for x in cov[b])
                 ev, evec = np.linalg.eigh(np.array([[vu, cuv], [cuv, vv]]))
                 d = 2.0 * np.sqrt(max(ev[1] - ev[0], 0.0))
+                single = max(min(self.area[a_], self.area[c_]), 1.0)
+                if d < cfg.split_min_px or area[b] < cfg.merge_area_ratio * single:
+                    # no visible second marker: merged head-on, or one hides the other
+                    self.unresolved[a_] = self.unresolved[c_] = True
                 if d >= cfg.split_min_px:
                     sep = d * evec[:, 1]
                     if sep @ rel < 0:
@@ -353,10 +395,13 @@ class MarkerTracker:
                 sub[a_] = uv[b] + sep / 2
                 sub[c_] = uv[b] - sep / 2
             else:
+                for m in ms:
+                    self.unresolved[m] = True
                 for m in ms:  # three or more: coast, but stay inside the blob
                     off = pred[m] - uv[b]
                     norm = float(np.linalg.norm(off))
                     sub[m] = uv[b] + (off * (blob_r[b] / norm) if norm > blob_r[b] else off)
+        self._update_certainty(pred, uv, assigned, merged, groups, gate)
         # state update
         for m in range(N_MARKERS):
             if m in assigned:
@@ -390,6 +435,123 @@ class MarkerTracker:
                     self.vel[m] = 0.0
         return self._output(uv, area, assigned, merged, n)
 
+    def _doubt(self, m: int) -> None:
+        if self.certain[m]:
+            self.certain[m] = False
+            self.uncertain_events += 1
+
+    def _update_certainty(self, pred: np.ndarray, uv: np.ndarray, assigned: dict[int, int], merged: set[int],
+                          groups: dict[int, list[int]], gate: np.ndarray) -> None:
+        """Identity bookkeeping: a pair leaving a merge keeps its labels only if the split was
+        unambiguous; a track back from a gap keeps its label only if no other track could
+        claim its blob; the last uncertain track of eight becomes certain by elimination."""
+        cfg = self.cfg
+        for ms in groups.values():
+            for m in ms:
+                self.partners[m] |= set(ms) - {m}
+        clean = {m: b for m, b in assigned.items() if m not in merged}
+        for m, b in clean.items():
+            if self.partners[m]:
+                doubt = bool(self.unresolved[m])
+                for k in list(self.partners[m]):
+                    if k < 0:  # an unknown marker shared the blob
+                        doubt = True
+                    elif k in clean and np.isfinite(pred[m]).all() and np.isfinite(pred[k]).all():
+                        zm, zk = uv[b], uv[clean[k]]
+                        same = np.sum((pred[m] - zm) ** 2) + np.sum((pred[k] - zk) ** 2)
+                        swap = np.sum((pred[m] - zk) ** 2) + np.sum((pred[k] - zm) ** 2)
+                        margin = (swap - same) / (2.0 * max(float(np.linalg.norm(zm - zk)), 1e-3))
+                        if margin < cfg.split_margin or self.unresolved[k]:
+                            doubt = True
+                            self._doubt(k)
+                        self.partners[k].discard(m)
+                        if not self.partners[k]:
+                            self.unresolved[k] = False
+                    elif k not in assigned:  # the partner vanished when they separated
+                        doubt = True
+                        self.partners[k].discard(m)
+                    else:  # partner still merged with another: this one's side is unknown
+                        doubt = True
+                if doubt:
+                    self._doubt(m)
+                self.partners[m] = set()
+                self.unresolved[m] = False
+            elif self.missing[m] > cfg.doubt_after_gap and np.isfinite(pred[m]).all():
+                others = [k for k in range(N_MARKERS) if k != m and np.isfinite(pred[k]).all()
+                          and np.linalg.norm(pred[k] - uv[b]) < gate[k] + gate[m]]
+                if others:
+                    self._doubt(m)
+        # elimination: all eight measured as separate blobs and only one of them uncertain
+        unsure = np.flatnonzero(~self.certain)
+        if len(unsure) == 1 and len(clean) == N_MARKERS and len(set(clean.values())) == N_MARKERS:
+            self.certain[unsure[0]] = True
+        self._recover(uv, assigned, clean)
+
+    def _violations(self, pos: dict[int, np.ndarray]) -> int:
+        """Body-plausibility violations of a labelling pos {marker: (2,) px} (a standing body
+        seen from roughly horizontal cameras): legs clearly crossed over relative to the
+        shoulder axis, a wrist out of its shoulder's reach, a shin too long, a knee or ankle
+        at shoulder height."""
+        bad = 0
+        sh_l, sh_r = pos.get(L_SH), pos.get(R_SH)
+        h = self.body_h
+        if sh_l is not None and sh_r is not None:
+            s = sh_l - sh_r
+            w = float(np.linalg.norm(s))
+            if w > 4.0:
+                a = s / w
+                for lm, rm in ((L_KN, R_KN), (L_AN, R_AN)):
+                    if lm in pos and rm in pos and (pos[lm] - pos[rm]) @ a < -1.0 * w:
+                        bad += 1
+            top = 0.5 * (sh_l[1] + sh_r[1])
+            for m in (L_KN, R_KN, L_AN, R_AN):
+                if m in pos and pos[m][1] < top + 0.25 * h:
+                    bad += 1
+        for sh, wr in ((L_SH, L_WR), (R_SH, R_WR)):
+            if sh in pos and wr in pos and np.linalg.norm(pos[wr] - pos[sh]) > 1.2 * self.reach_px:
+                bad += 1
+        for kn, an in ((L_KN, L_AN), (R_KN, R_AN)):
+            if kn in pos and an in pos and np.linalg.norm(pos[kn] - pos[an]) > 1.25 * self.shin_px:
+                bad += 1
+        return bad
+
+    def _recover(self, uv: np.ndarray, assigned: dict[int, int], clean: dict[int, int]) -> None:
+        """Give uncertain tracks their identities back when every marker is in view, the
+        uncertain ones on separate blobs, and exactly one way of labelling those blobs is
+        plausible (``_violations``) for ``recover_frames`` frames in a row."""
+        cfg = self.cfg
+        unsure = [m for m in range(N_MARKERS) if not self.certain[m]]
+        ok = (0 < len(unsure) <= 4 and self.body_h > 0 and len(assigned) == N_MARKERS
+              and all(m in clean for m in unsure) and len({clean[m] for m in unsure}) == len(unsure))
+        if not ok:
+            self._recover_key, self._recover_streak = None, 0
+            return
+        fixed = {m: uv[b] for m, b in assigned.items() if self.certain[m]}
+        plausible = []
+        for perm in itertools.permutations(unsure):
+            pos = dict(fixed)
+            pos.update({lab: uv[clean[m]] for m, lab in zip(unsure, perm)})
+            if self._violations(pos) == 0:
+                plausible.append(perm)
+                if len(plausible) > 1:
+                    break
+        if len(plausible) != 1:
+            self._recover_key, self._recover_streak = None, 0
+            return
+        key = (tuple(unsure), plausible[0])
+        self._recover_streak = self._recover_streak + 1 if key == self._recover_key else 1
+        self._recover_key = key
+        if self._recover_streak < cfg.recover_frames:
+            return
+        order = list(range(N_MARKERS))
+        for m, lab in zip(unsure, plausible[0]):
+            order[lab] = m
+        for name in ("pos", "vel", "area", "missing", "stale"):
+            setattr(self, name, getattr(self, name)[order].copy())
+        self.certain[list(plausible[0])] = True
+        self.recovered += 1
+        self._recover_key, self._recover_streak = None, 0
+
     def _init_index(self, uv: np.ndarray) -> np.ndarray:
         D = np.linalg.norm(self.pos[:, None, :] - uv[None, :, :], axis=2)
         return D.argmin(1)
@@ -397,13 +559,22 @@ class MarkerTracker:
     def _output(self, uv: np.ndarray, area: np.ndarray, assigned: dict[int, int], merged: set[int], n: int) -> TrackOutput:
         labels, pts, areas, flags = [], [], [], []
         used = set(assigned.values())
+        emitted: set[int] = set()
         for m in range(N_MARKERS):
             if m in assigned:
                 b = assigned[m]
-                labels.append(m)
+                mflag = FLAG_MERGED if m in merged else 0
+                if not self.certain[m]:
+                    if b in emitted:
+                        continue
+                    labels.append(UNLABELLED)
+                    flags.append(FLAG_UNCERTAIN | mflag)
+                else:
+                    labels.append(m)
+                    flags.append(FLAG_TRACKED | mflag)
+                emitted.add(b)
                 pts.append(uv[b])
                 areas.append(area[b])
-                flags.append(FLAG_TRACKED | (FLAG_MERGED if m in merged else 0))
             else:
                 labels.append(m)
                 pts.append(self.pos[m])

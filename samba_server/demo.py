@@ -91,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"samba-demo: {args.motes} simulated motes -> server on {endpoint}; Ctrl-C to stop", file=sys.stderr)
     try:
-        code = run_live(server, run_args, on_tick=on_tick)
+        code = run_live(server, run_args, on_tick=on_tick, before_close=sim.stop)
     finally:
         sim.stop()
         tmp.cleanup()

@@ -88,7 +88,13 @@ class LiveServer:
             self._pub_json.put(pose_to_json(msg))
 
     def close(self) -> None:
-        """Stop processing, flush the last frames, close the session (idempotent)."""
+        """Stop ingesting, process what is queued, flush the last frames, close (idempotent)."""
+        for d in self._decls:  # no new packets from here on
+            try:
+                d.undeclare()
+            except Exception:  # pragma: no cover
+                pass
+        self._decls = []
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=10)
@@ -100,12 +106,6 @@ class LiveServer:
                 except Exception:  # pragma: no cover
                     log.exception("final flush failed")
             self._thread = None
-        for d in self._decls:
-            try:
-                d.undeclare()
-            except Exception:  # pragma: no cover
-                pass
-        self._decls = []
         if self._z is not None:
             self._z.close()
             self._z = None

@@ -10,7 +10,9 @@ proportions as a prior, scaled by what the take shows:
 - torso + thigh = a high percentile of the shoulder-midpoint–knee distance (upright, legs
   straight: the standard pose at the start of every take), split in the database ratio after
   removing the sideways hip offset;
-- hip width and neck = database value × the mean scale of the observed bones.
+- hip width: from the knee and ankle spacing in the standard pose (legs straight, so the hip
+  spacing is the knee spacing extrapolated past the ankles), else database value × scale;
+- neck = database value × the mean scale of the observed bones.
 
 :func:`estimate_lengths` does this on a whole take (or its first second live); the
 reconstructor's whole-take refinement (:func:`samba_server.reconstruct.refine_lengths`) then
@@ -44,6 +46,22 @@ def _robust(values: np.ndarray, q: float | None = None) -> float:
     return float(np.median(v) if q is None else np.percentile(v, q))
 
 
+def standard_pose_frames(markers: np.ndarray, arm: float) -> np.ndarray:
+    """Boolean (F,): frames that look like the standard pose (arms straight and level, knees and
+    ankles below the hips). arm: the subject's shoulder-wrist length when straight (m)."""
+    with np.errstate(invalid="ignore"):
+        ok = np.ones(len(markers), bool)
+        for side in ("left", "right"):
+            s, w = markers[:, M[f"{side}_shoulder"]], markers[:, M[f"{side}_wrist"]]
+            ok &= np.linalg.norm(s - w, axis=-1) > 0.95 * arm
+            ok &= np.abs(s[:, 2] - w[:, 2]) < 0.15 * arm
+            k, a = markers[:, M[f"{side}_knee"]], markers[:, M[f"{side}_ankle"]]
+            leg = k - a
+            ok &= leg[:, 2] > 0.95 * np.linalg.norm(leg, axis=-1)
+            ok &= s[:, 2] > k[:, 2]
+    return ok
+
+
 def estimate_lengths(markers: np.ndarray, db_lengths: np.ndarray, straight_percentile: float = 97.0) -> np.ndarray:
     """Bone lengths (8,) metres of the subject in ``markers`` (F, 8, 3) (NaN = missing).
 
@@ -74,6 +92,14 @@ def estimate_lengths(markers: np.ndarray, db_lengths: np.ndarray, straight_perce
     out[L["torso"]] = vertical * db[L["torso"]] / db_leg
     out[L["thigh"]] = vertical * db[L["thigh"]] / db_leg
     out[L["hip_width"]] = db[L["hip_width"]] * scale
+    stand = standard_pose_frames(markers, arm)
+    if stand.sum() >= 5:
+        # legs straight below the hips: extrapolate the knee spacing past the ankle spacing
+        knee_sep = _dist(markers[stand], "left_knee", "right_knee")
+        ankle_sep = _dist(markers[stand], "left_ankle", "right_ankle")
+        hip_sep = _robust(knee_sep - (ankle_sep - knee_sep) * out[L["thigh"]] / out[L["shin"]])
+        if np.isfinite(hip_sep):
+            out[L["hip_width"]] = float(np.clip(hip_sep, 0.6 * out[L["hip_width"]], 1.5 * out[L["hip_width"]]))
     out[L["neck"]] = db[L["neck"]] * scale
     log.debug("estimated lengths %s (scale %.3f)", np.round(out, 4), scale)
     return out

@@ -27,14 +27,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
-from samba_common.align import AlignmentError, batch_frames, marker_frame
-from samba_common.body import fk_body
+from samba_common.align import batch_frames
+from samba_common.body import D, fk_body
 from samba_common.skeleton import BONE_TYPES, MARKER_JOINT, N_JOINTS, N_MARKERS
 
 from .db import MotionDB, load_default_db
 from .proportions import ProportionError, estimate_lengths
-from .pseudo import N_ANGLES, pseudo_poses
-from .solver import Problem, State, levenberg_marquardt, residuals
+from . import kernels
 
 log = logging.getLogger(__name__)
 
@@ -56,15 +55,16 @@ class ReconstructConfig:
     pseudo: int = 10
     ball_sigma_deg: float = 6.0
     hinge_sigma_deg: float = 8.0
-    prior_floor_deg: float = 8.0
+    prior_floor_deg: float = 5.0
     prior_weight: float = 0.5
     sigma_marker: float = 0.003
-    accel: float = 30.0
+    accel: float = 80.0
     min_markers: int = 4
     max_gap: float = 0.3
     max_iter: int = 15
     body_frames: int = 30
     seed: int = 7
+    parts: bool = True
 
 
 @dataclass
@@ -80,11 +80,20 @@ class PoseResult:
     status: str
 
 
-class PoseIndex:
-    """KD-tree over the database poses re-posed with one subject's bone lengths.
+#: feature columns (of the 24 aligned marker coordinates) and pose-vector entries of each body
+#: part: left arm (left wrist), right arm (right wrist), trunk and legs (knees, ankles)
+PART_FEATURES = (np.r_[6:9], np.r_[9:12], np.r_[12:24])
+PART_DIMS = (np.r_[9:12, 15:18], np.r_[12:15, 18:21], np.r_[0:9, 21:39])
+WHOLE = (np.r_[0:24], np.r_[0:39])
+_MARKERS = np.array(MARKER_JOINT)
 
-    features: (N, 24) aligned markers (metres, body frame); R_A: (N, 3, 3) marker-frame axes in
-    torso coordinates, to carry a neighbour's torso orientation into the world.
+
+class PoseIndex:
+    """KD-trees over the database poses re-posed with one subject's bone lengths.
+
+    features: (N, 24) aligned markers (metres, marker body frame); R_A: (N, 3, 3) marker-frame
+    axes in torso coordinates, to carry a neighbour's torso orientation into the world.
+    One tree over the whole feature and one per body part (:data:`PART_FEATURES`).
     """
 
     def __init__(self, db: MotionDB, lengths: np.ndarray):
@@ -92,43 +101,39 @@ class PoseIndex:
         markers = body[:, list(MARKER_JOINT)]
         origin, R_A = batch_frames(markers)
         self.features = np.einsum("fpi,fij->fpj", markers - origin[:, None], R_A).reshape(len(db), -1)
-        self.R_A = R_A
-        self.tree = cKDTree(self.features)
+        self.R_A = np.ascontiguousarray(R_A)
+        self.trees = {cols.tobytes(): cKDTree(self.features[:, cols]) for cols in (WHOLE[0], *PART_FEATURES)}
 
-    def query(self, feature: np.ndarray, k: int) -> np.ndarray:
-        """Indices (k,) of the nearest poses to an aligned marker feature (24,)."""
-        _d, idx = self.tree.query(feature, k=k)
-        return np.atleast_1d(idx)
+    def query(self, feature: np.ndarray, cols: np.ndarray, k: int) -> np.ndarray:
+        """Indices (k,) of the poses nearest to ``feature`` (24,) on columns ``cols``.
 
-    def query_partial(self, feature: np.ndarray, seen: np.ndarray, k: int) -> np.ndarray:
-        """Nearest poses using only the coordinates of seen markers (brute force, (8,) bool)."""
-        cols = np.repeat(seen, 3)
-        d = np.sum((self.features[:, cols] - feature[cols]) ** 2, axis=1)
-        return np.argpartition(d, k)[:k] if k < len(d) else np.arange(len(d))
+        NaN entries (unseen markers with no prediction) are left out of the distance."""
+        f = feature[cols]
+        ok = np.isfinite(f)
+        if ok.all():
+            _d, idx = self.trees[cols.tobytes()].query(f, k=k)
+            return np.atleast_1d(idx).astype(np.int64)
+        if not ok.any():  # nothing of this part seen: fall back to the whole body
+            cols, ok = WHOLE[0], np.isfinite(feature)
+            f = feature
+        d = np.sum((self.features[:, cols[ok]] - f[ok]) ** 2, axis=1)
+        return (np.argpartition(d, k)[:k] if k < len(d) else np.arange(len(d))).astype(np.int64)
+
+
+def _padded(dims: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Part dims as a (P, 39) int64 array padded with zeros, and their counts (P,)."""
+    out = np.zeros((len(dims), kernels.N_POSE), np.int64)
+    for i, d in enumerate(dims):
+        out[i, :len(d)] = d
+    return out, np.array([len(d) for d in dims], np.int64)
 
 
 @dataclass
 class _History:
     joints: list[np.ndarray] = field(default_factory=list)  # last two solved world poses
-    state: State | None = None
+    state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # R, o, dirs of the last pose
     t_last: float = -np.inf   # time of the last solved or bridged frame
     t_seen: float = -np.inf   # time of the last frame with enough markers
-
-
-def _local_prior(pool: np.ndarray, lengths: np.ndarray, floor: float, weight: float) -> tuple[np.ndarray, np.ndarray]:
-    """Gaussian over the pose vectors of pooled poses (P, 11, 3): mean (39,) and whitening W (39, 39).
-
-    The pose vector is vec(dirs) followed by the torso's y and z axes expressed in the marker
-    body frame, so the prior also knows how the torso sits relative to the legs.
-    """
-    _o, R_A = batch_frames(fk_body(pool, lengths)[:, list(MARKER_JOINT)])
-    X = np.concatenate([pool.reshape(len(pool), -1), R_A[:, 1, :], R_A[:, 2, :]], axis=1)
-    mu = X.mean(axis=0)
-    C = np.cov(X, rowvar=False) if len(X) > 1 else np.zeros((X.shape[1], X.shape[1]))
-    evals, evecs = np.linalg.eigh(C)
-    evals = np.maximum(evals, 0.0) + floor**2
-    W = (evecs / np.sqrt(evals)).T * np.sqrt(weight)
-    return mu, W
 
 
 class Reconstructor:
@@ -142,8 +147,14 @@ class Reconstructor:
                  lengths: np.ndarray | None = None):
         self.db = db if db is not None else load_default_db()
         self.config = config or ReconstructConfig()
-        rng = np.random.default_rng(self.config.seed)
-        self._noise = rng.standard_normal((self.config.pseudo, N_ANGLES))
+        cfg = self.config
+        rng = np.random.default_rng(cfg.seed)
+        sigma = np.full(kernels.N_ANGLES, np.radians(cfg.ball_sigma_deg))
+        sigma[7::3] = np.radians(cfg.hinge_sigma_deg)  # the third angle of each limb is its hinge
+        angles = rng.standard_normal((cfg.pseudo, kernels.N_ANGLES)) * sigma  # fixed bank: deterministic
+        self._cos, self._sin = np.cos(angles), np.sin(angles)
+        self._floor2 = float(np.radians(cfg.prior_floor_deg) ** 2)
+        self._dims = {flag: _padded(PART_DIMS if flag else (WHOLE[1],)) for flag in (False, True)}
         self._estimating = lengths is None
         self._body_buffer: list[np.ndarray] = []
         self.lengths: np.ndarray | None = None
@@ -207,57 +218,35 @@ class Reconstructor:
             return self._unsolved(n_seen)
         filled = markers.copy()
         if pred is not None:
-            filled[~seen] = pred[list(MARKER_JOINT)][~seen]
-        try:
-            frame = marker_frame(filled, scale=1.0)
-        except AlignmentError:
-            return self._unsolved(n_seen)
-        feature = ((filled - frame.origin) @ frame.R).reshape(-1)
+            filled[~seen] = pred[_MARKERS][~seen]
+        if not (np.isfinite(filled[:2]).all() and np.any(filled[0] != filled[1])):
+            return self._unsolved(n_seen)  # no shoulders, no body frame
+        RA = kernels.marker_axes(filled)
+        origin = 0.5 * (filled[0] + filled[1])
+        feature = ((filled - origin) @ RA).reshape(-1)
         k = min(cfg.k, len(self.db))
-        if np.all(np.isfinite(feature)):
-            nbr = self.index.query(feature, k)
-        else:
-            nbr = self.index.query_partial(np.nan_to_num(feature), np.all(np.isfinite(filled), axis=1), k)
-        pool = pseudo_poses(self.db.dirs[nbr].astype(float), self._noise, np.radians(cfg.ball_sigma_deg),
-                            np.radians(cfg.hinge_sigma_deg))
-        mu, W = _local_prior(pool, self.lengths, np.radians(cfg.prior_floor_deg), cfg.prior_weight)
+        nbrs = np.stack([self.index.query(feature, cols, k) for cols in (PART_FEATURES if cfg.parts else WHOLE[:1])])
         h = self._hist
         dt = t - h.t_last if h.joints else 0.0
         smooth = len(h.joints) == 2 and dt > 0
-        pb = Problem(self.lengths, mu, W, frame.R, markers, cfg.sigma_marker,
-                     h.joints[-1] if smooth else None, h.joints[-2] if smooth else None,
-                     sigma_s=max(cfg.accel * dt * dt, 1e-3))
-        starts = [self._linear_start(frame, nbr, pool, markers, seen)]
-        if h.state is not None and pred is not None:
-            prev = h.state.copy()
-            if len(h.joints) == 2:
-                prev.o = prev.o + (h.joints[-1][1:3].mean(0) - h.joints[-2][1:3].mean(0))
-            starts.append(prev)
-        costs = [float(np.sum(residuals(s, pb)[0] ** 2)) for s in starts]
-        st, iters, _cost, q = levenberg_marquardt(starts[int(np.argmin(costs))], pb, cfg.max_iter)
-        err = q[list(MARKER_JOINT)][seen] - markers[seen]
+        target = 2.0 * h.joints[-1] - h.joints[-2] if smooth else np.zeros((N_JOINTS, 3))
+        has_prev = h.state is not None and pred is not None
+        R0, o0, d0 = h.state if has_prev else (np.eye(3), np.zeros(3), np.zeros((11, 3)))
+        if has_prev and len(h.joints) == 2:  # shoulder midpoint moves on at constant velocity
+            o0 = o0 + 0.5 * (h.joints[-1][1] + h.joints[-1][2] - h.joints[-2][1] - h.joints[-2][2])
+        dims, n_dims = self._dims[cfg.parts]
+        R, o, d, q, iters = kernels.solve_frame(
+            self.db.dirs, nbrs, dims, n_dims, self._cos, self._sin, self.lengths, self._floor2, cfg.prior_weight,
+            self.index.R_A[nbrs[-1, 0]], RA, origin, np.where(seen[:, None], markers, 0.0), seen,
+            cfg.sigma_marker, smooth, target, max(cfg.accel * dt * dt, 1e-3), has_prev, R0, o0, d0, kernels.G,
+            cfg.max_iter, 1e-6)
+        err = q[_MARKERS][seen] - markers[seen]
         resid = float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if n_seen else float("nan")
         h.joints = (h.joints + [q])[-2:]
-        h.state, h.t_last = st, t
+        h.state, h.t_last = (R, o, d), t
         if not bridged:
             h.t_seen = t
-        return PoseResult(q, resid, n_seen, iters, "bridged" if bridged else "solved")
-
-    def _linear_start(self, frame, nbr: np.ndarray, pool: np.ndarray, markers: np.ndarray, seen: np.ndarray) -> State:
-        """The thesis' start: observed markers as a least-squares blend of the pooled poses' markers."""
-        body = fk_body(pool, self.lengths)[:, list(MARKER_JOINT)]          # (P, 8, 3) torso frame
-        R_nn = self.index.R_A[nbr[0]]
-        obs_torso = ((markers - frame.origin) @ frame.R) @ R_nn.T            # observed, in the nn's torso frame
-        A = body[:, seen].reshape(len(pool), -1).T                            # (3S, P)
-        b = obs_torso[seen].reshape(-1)
-        lam = 1e-3 * np.trace(A @ A.T) / max(A.shape[0], 1) + 1e-12
-        gamma = A.T @ np.linalg.solve(A @ A.T + lam * np.eye(A.shape[0]), b)
-        d = np.tensordot(gamma, pool, axes=1)
-        norms = np.linalg.norm(d, axis=1, keepdims=True)
-        d = np.where(norms > 1e-6, d / np.maximum(norms, 1e-12), pool[0])
-        d[2, 2] = 0.0  # the spine stays in the torso's x-y plane
-        d[2] /= np.linalg.norm(d[2])
-        return State(frame.R @ R_nn.T, frame.origin.copy(), d)
+        return PoseResult(q, resid, n_seen, int(iters), "bridged" if bridged else "solved")
 
 
 def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = None,

@@ -178,7 +178,7 @@ class Server:
             return []
         if kind == "leave":
             log.info("mote %s left", mote_id)
-            return [self._frame(f) for f in self.sync.mote_left(mote_id)]
+            return [self._frame(f) for f in self.sync.mote_left(mote_id, t)]
         self.stats.packets += 1
         try:
             pkt = decode_packet(payload)

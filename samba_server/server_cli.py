@@ -196,7 +196,8 @@ def main(argv: list[str] | None = None) -> int:
     return run_live(server, args)
 
 
-def run_live(server: Server, args, extra_stop: threading.Event | None = None, on_tick=None) -> int:
+def run_live(server: Server, args, extra_stop: threading.Event | None = None, on_tick=None,
+             before_close=None) -> int:
     """Run ``server`` on Zenoh until Ctrl-C, SIGTERM or ``args.duration``; export/close at the end."""
     from .live import LiveServer
 
@@ -229,6 +230,8 @@ def run_live(server: Server, args, extra_stop: threading.Event | None = None, on
         print(f"\n{Path(sys.argv[0]).name}: {exc}", file=sys.stderr)
         code = 1
     finally:
+        if before_close is not None:
+            before_close()
         live.close()
         if viewer is not None:
             viewer.stop()

@@ -90,14 +90,19 @@ class SimMotes:
         self._pubs: dict[int, object] = {}
         self._tokens: dict[int, object] = {}
 
-    def _open(self, m: int) -> None:
+    def _open(self, m: int, wait_match: float = 0.0) -> None:
+        """Open mote m's session; with ``wait_match`` only publish once the server matched."""
         import zenoh
 
         name = self.rig.names[m]
         z = zenoh.open(zk.make_config(connect=self.connect))
         self._sessions[m] = z
         self._tokens[m] = z.liveliness().declare_token(zk.liveliness_key(self.session, name))
-        self._pubs[m] = z.declare_publisher(zk.markers_key(self.session, name), express=True)
+        pub = z.declare_publisher(zk.markers_key(self.session, name), express=True)
+        deadline = time.monotonic() + wait_match
+        while wait_match and not pub.matching_status.matching and time.monotonic() < deadline:
+            time.sleep(0.005)
+        self._pubs[m] = pub
 
     def _close(self, m: int) -> None:
         z = self._sessions.pop(m, None)
@@ -169,7 +174,8 @@ class SimMotes:
                         continue
                     if m in killed and t_rel >= restart_s:
                         killed.discard(m)
-                        self._open(m)
+                        # reopen in the background: the other motes keep streaming meanwhile
+                        threading.Thread(target=self._open, args=(m, 3.0), daemon=True).start()
                         seqs[m] = 0
                         log.info("sim mote %s restarted", self.rig.names[m])
                 if rng.random() < net.drop:

@@ -115,7 +115,7 @@ class FrameSync:
         self._pending: list[_Pending] = []
         self._delay: dict[str, _MinDelay] = {}
         self._last_seq: dict[str, int] = {}
-        self._gone: set[str] = set()
+        self._gone: dict[str, int] = {}  # mote -> time it left (arrival clock)
         self.motes: dict[str, MoteSyncStats] = {}
         self.now_ns = 0
         self.last_anchor: int | None = None
@@ -132,13 +132,13 @@ class FrameSync:
         if st.received:
             st.restarts += 1
         st.last_arrival_ns = max(st.last_arrival_ns, self.now_ns)
-        self._gone.discard(mote_id)
+        self._gone.pop(mote_id, None)
         self._delay.pop(mote_id, None)
         self._last_seq.pop(mote_id, None)
 
-    def mote_left(self, mote_id: str) -> list[Frame]:
-        """A mote is gone: stop waiting for it; returns frames that became complete."""
-        self._gone.add(mote_id)
+    def mote_left(self, mote_id: str, t_ns: int | None = None) -> list[Frame]:
+        """A mote is gone (at ``t_ns``): stop waiting for it; returns frames now complete."""
+        self._gone[mote_id] = self.now_ns if t_ns is None else t_ns
         return self._emit_ready()
 
     def push(self, p: SyncPacket) -> list[Frame]:
@@ -148,7 +148,7 @@ class FrameSync:
         silent = st.received > 0 and p.arrival_ns - st.last_arrival_ns > self._dead
         st.received += 1
         st.last_arrival_ns = p.arrival_ns
-        self._gone.discard(p.mote_id)
+        self._gone.pop(p.mote_id, None)
         last = self._last_seq.get(p.mote_id)
         if last is not None and p.seq == last:
             st.duplicate += 1
@@ -210,7 +210,10 @@ class FrameSync:
         return out
 
     def _emit(self, fr: _Pending, alive: set[str] | None = None) -> Frame:
-        alive = set(self.alive()) if alive is None else alive
+        # "missing" is judged at the frame's own time, so it does not depend on when the
+        # frame happened to be emitted (live idle polls vs replay)
+        alive = {m for m, st in self.motes.items()
+                 if self._gone.get(m, fr.anchor + 1) > fr.anchor and fr.anchor - st.last_arrival_ns <= self._dead}
         missing = tuple(sorted(alive - fr.packets.keys()))
         t = sum(p.tc_ns for p in fr.packets.values()) // len(fr.packets)
         t = max(t, self._last_t + 1)

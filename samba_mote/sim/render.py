@@ -20,7 +20,7 @@ class SimConfig:
     """Simulation settings (``[sim]`` in configs/mote.toml or samba-sim options)."""
 
     fps: float = 60.0
-    marker_radius_m: float = 0.07  #: apparent radius of the glowing marker (px = fx * this / depth)
+    marker_radius_m: float = 0.06  #: apparent radius of the glowing marker (px = fx * this / depth)
     blur: float = 0.45  #: edge softness of the disk (px)
     peak: float = 235.0  #: marker grey level at the centre
     background: float = 12.0  #: mean background grey level

@@ -16,7 +16,7 @@ _L = {name: i for i, name in enumerate(BONE_TYPES)}
 
 
 def tpose(lengths: np.ndarray, hip_xy: np.ndarray = (0.0, 0.0), ankle_z: float = 0.08,
-          stance: float = 0.08) -> np.ndarray:
+          stance: float = 0.12) -> np.ndarray:
     """T-pose joints (13, 3): lengths (8,) in BONE_TYPES order (metres), hip midpoint at
     ``hip_xy`` (2,), ankles at height ``ankle_z``; facing +Y, right hand toward +X.
 

@@ -19,7 +19,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
-from samba_common.calib import Camera, rodrigues
+from samba_common.calib import Camera, rotation_to_rvec
 
 log = logging.getLogger(__name__)
 
@@ -187,8 +187,6 @@ def bundle_adjust(
 
 def camera_from_pose(cam: Camera, R: np.ndarray, t: np.ndarray) -> Camera:
     """Copy of ``cam`` with world->camera rotation R (3, 3) and translation t (3,)."""
-    from samba_common.calib import rotation_to_rvec
-
     return Camera(cam.name, cam.size, cam.matrix.copy(), cam.dist.copy(), rotation_to_rvec(R), np.asarray(t, float).copy())
 
 
@@ -203,4 +201,4 @@ def transform_rig(cameras: list[Camera], A: np.ndarray, b: np.ndarray, s: float 
 
 
 __all__ = ["Observations", "BundleResult", "bundle_adjust", "project_obs", "rotate", "transform_rig",
-           "camera_from_pose", "rodrigues"]
+           "camera_from_pose"]

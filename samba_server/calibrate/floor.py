@@ -22,7 +22,7 @@ from samba_common.calib import CameraRig
 from samba_common.skeleton import M
 from samba_server.calibrate.bundle import transform_rig
 from samba_server.calibrate.wand import CalibrateError
-from samba_server.triangulate import TriangulateConfig, Triangulator
+from samba_server.triangulate import Triangulator
 
 log = logging.getLogger(__name__)
 
@@ -42,33 +42,19 @@ def frame_from_axes(origin: np.ndarray, x_dir: np.ndarray, up: np.ndarray) -> tu
 
 
 def match_views(rig: CameraRig, uv: np.ndarray) -> np.ndarray:
-    """Label unlabelled blobs consistently across views by epipolar fit.
+    """Label unlabelled blobs consistently across views.
 
-    uv: (F, C, K, 2) raw pixels, any order per view, NaN = view missing. Each view's order is
-    permuted to match the first camera that sees the frame (best 2-view reprojection error
-    over all K! orders). Returns the reordered array."""
-    F, C, K, _ = uv.shape
-    out = uv.copy()
-    seen = np.all(np.isfinite(uv), axis=(2, 3))
-    ref = np.argmax(seen, axis=1)  # first camera seeing each frame
+    uv: (F, C, K, 2) raw pixels, any order per view, NaN = view missing. Every combination
+    of orders over the views is tried per frame (K!^(C-1) triangulations, fine for the
+    3-marker L-frame and <= 5 cameras); the one with the smallest reprojection error wins.
+    Returns the reordered array (orders consistent across views, arbitrary across frames)."""
+    from samba_server.calibrate.wand import _resolve
+
+    K = uv.shape[2]
     perms = list(itertools.permutations(range(K)))
-    for r in range(C):
-        for c in range(C):
-            fr = np.flatnonzero((ref == r) & seen[:, c] & seen[:, r]) if c != r else []
-            if not len(fr):
-                continue
-            tri = Triangulator(CameraRig([rig.cameras[r], rig.cameras[c]]), TriangulateConfig(max_error_px=1e9))
-            best = np.full(len(fr), np.inf)
-            choice = np.zeros((len(fr), K), dtype=int)
-            for p in perms:
-                pu = uv[fr, c][:, list(p)]
-                res = tri.triangulate(np.stack([uv[fr, r].reshape(-1, 2), pu.reshape(-1, 2)]))
-                cost = np.nansum(res.error.reshape(len(fr), K) ** 2, axis=1)
-                cost[~np.all(np.isfinite(res.error.reshape(len(fr), K)), axis=1)] = np.inf
-                better = cost < best
-                best[better] = cost[better]
-                choice[better] = p
-            out[fr, c] = np.take_along_axis(uv[fr, c], choice[..., None], axis=1)
+    if len(perms) ** (len(rig) - 1) > 5000:
+        raise CalibrateError(f"too many cameras ({len(rig)}) to match {K} unlabelled markers exhaustively")
+    out, _, _ = _resolve(list(rig.cameras), uv, perms=perms)
     return out
 
 

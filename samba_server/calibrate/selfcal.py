@@ -105,30 +105,23 @@ def self_calibrate(
     pose_uv = uv[:n_pose]
     sub = _subsample(uv, max_frames)
     co = np.array([[np.sum(seen[:, a] & seen[:, b]) if a != b else 0 for b in range(C)] for a in range(C)])
-    i, j = (int(v) for v in np.unravel_index(np.argmax(co), co.shape))
-    both = seen[:, i] & seen[:, j]
-    if both.sum() < 30:
-        raise CalibrateError(f"best camera pair {cams0[i].name}-{cams0[j].name} shares only {int(both.sum())} markers")
-    p1 = normalized(cams0[i], uv[:, i][both])
-    p2 = normalized(cams0[j], uv[:, j][both])
-    f = 0.5 * (cams0[i].matrix[0, 0] + cams0[j].matrix[0, 0])
-    E, mask = cv2.findEssentialMat(p1, p2, np.eye(3), method=cv2.RANSAC, prob=0.9999, threshold=0.7 / f)
-    if E is None or E.shape != (3, 3):
-        raise CalibrateError("no essential matrix: the subject did not move enough")
-    inl = mask.ravel().astype(bool)
-    _, R, t, _ = cv2.recoverPose(E, p1[inl], p2[inl], np.eye(3))
-    posed: list[Camera | None] = [None] * C
-    posed[i] = camera_from_pose(cams0[i], np.eye(3), np.zeros(3))
-    posed[j] = camera_from_pose(cams0[j], R, t.ravel())
-    while any(p is None for p in posed):
-        idx = [c for c in range(C) if posed[c] is not None]
-        P = _triangulate([posed[c] for c in idx], sub[:, idx])
-        cand = [(int(np.sum(np.isfinite(P[..., 0]) & seen[:: max(1, int(np.ceil(F / max_frames))), c])), c)
-                for c in range(C) if posed[c] is None]
-        n, c = max(cand)
-        posed[c] = _pnp(cams0[c], P.reshape(-1, 3), sub[:, c].reshape(-1, 2))
-    cams = [p for p in posed if p is not None]
-    cams, rms, nobs = _adjust(cams, sub, fixed=(i,))
+    pairs = sorted(((co[a, b], a, b) for a in range(C) for b in range(a + 1, C)), reverse=True)
+    best, errors = None, []
+    for n, i, j in pairs[:3]:
+        try:
+            cams, rms, nobs = _initialise(cams0, uv, sub, seen, int(i), int(j), max_frames)
+        except CalibrateError as exc:
+            errors.append(str(exc))
+            continue
+        total = float(np.sqrt(np.mean([v ** 2 for v in rms.values()])))
+        log.info("self-calibration from %s-%s: rms %.3f px", cams0[i].name, cams0[j].name, total)
+        if best is None or total < best[0]:
+            best = (total, cams, rms, nobs)
+        if total < 1.0:
+            break
+    if best is None or best[0] > 3.0:
+        raise CalibrateError("self-calibration did not converge: " + ("; ".join(errors) or "large reprojection errors"))
+    _, cams, rms, nobs = best
     # metric scale
     allP = _triangulate(cams, uv)
     if tibia is not None:
@@ -150,6 +143,34 @@ def self_calibrate(
     A, b = standard_pose_transform(_triangulate(cams, pose_uv), ankle_height)
     cams = transform_rig(cams, A, b)
     return CameraRig(cams, dict(rig.metadata)), SelfCalReport(rms, nobs, len(sub), source)
+
+
+def _initialise(cams0, uv, sub, seen, i, j, max_frames):
+    """Poses from pair (i, j) (essential matrix) and PnP for the others, then adjustment."""
+    C = len(cams0)
+    F = len(uv)
+    both = seen[:, i] & seen[:, j]
+    if both.sum() < 30:
+        raise CalibrateError(f"camera pair {cams0[i].name}-{cams0[j].name} shares only {int(both.sum())} markers")
+    p1 = normalized(cams0[i], uv[:, i][both])
+    p2 = normalized(cams0[j], uv[:, j][both])
+    f = 0.5 * (cams0[i].matrix[0, 0] + cams0[j].matrix[0, 0])
+    E, mask = cv2.findEssentialMat(p1, p2, np.eye(3), method=cv2.RANSAC, prob=0.9999, threshold=0.7 / f)
+    if E is None or E.shape[0] < 3:
+        raise CalibrateError("no essential matrix: the subject did not move enough")
+    inl = mask.ravel().astype(bool)
+    _, R, t, _ = cv2.recoverPose(E[:3], p1[inl], p2[inl], np.eye(3))
+    posed: list[Camera | None] = [None] * C
+    posed[i] = camera_from_pose(cams0[i], np.eye(3), np.zeros(3))
+    posed[j] = camera_from_pose(cams0[j], R, t.ravel())
+    step = max(1, int(np.ceil(F / max_frames)))
+    while any(p is None for p in posed):
+        idx = [c for c in range(C) if posed[c] is not None]
+        P = _triangulate([posed[c] for c in idx], sub[:, idx])
+        cand = [(int(np.sum(np.isfinite(P[..., 0]) & seen[::step, c][: len(P)])), c) for c in range(C) if posed[c] is None]
+        _, c = max(cand)
+        posed[c] = _pnp(cams0[c], P.reshape(-1, 3), sub[:, c].reshape(-1, 2))
+    return _adjust([p for p in posed if p is not None], sub, fixed=(i,))
 
 
 def _adjust(cams: list[Camera], uv: np.ndarray, fixed: tuple[int, ...], max_error_px: float = 3.0):

@@ -98,3 +98,89 @@ def save_observations(path: str | os.PathLike, obs: SimObservations, names: list
     extra = {} if offsets is None else {"offsets": np.asarray(offsets, float)}
     np.savez_compressed(Path(path), uv=obs.uv, t=obs.t, points=obs.points,
                         camera_names=np.array(names), kind=np.array(kind), **extra)
+
+
+def simulate_subject(rig: CameraRig, seconds: float = 8.0, noise_px: float = 0.2, seed: int = 0,
+                     fps: float = 60.0) -> SimObservations:
+    """A labelled take for self-calibration: 1 s of the standard pose, then the mote
+    simulator's procedural motion; uv (F, C, 8, 2) in MARKER_NAMES order, per-marker NaN
+    outside the image; points (F, 8, 3) true markers."""
+    from samba_common.body import prepend_standard_pose
+    from samba_common.skeleton import MARKER_JOINT
+    from samba_mote.sim.motion import synthetic_motion
+
+    rng = np.random.default_rng(seed)
+    joints, _ = synthetic_motion(seconds, fps)
+    joints = prepend_standard_pose(joints, fps)
+    pts = joints[:, list(MARKER_JOINT)]
+    F = len(pts)
+    uv = rig.project(pts.reshape(-1, 3)).reshape(len(rig), F, 8, 2).transpose(1, 0, 2, 3).copy()
+    uv += rng.normal(0.0, noise_px, uv.shape)
+    for c, cam in enumerate(rig.cameras):
+        uv[:, c][~cam.in_image(uv[:, c].reshape(-1, 2), 1.0).reshape(F, 8)] = np.nan
+    return SimObservations(uv, pts, np.arange(F) / fps)
+
+
+def write_videos(out_dir: str | os.PathLike, rig: CameraRig, obs: SimObservations, fps: float,
+                 seed: int = 0, fourcc: str = "FFV1") -> list[Path]:
+    """Render the markers of ``obs`` as glowing disks into ``cam0.avi`` ... with the mote
+    simulator's renderer (:mod:`samba_mote.sim.render`, no distractors)."""
+    import cv2
+
+    from samba_mote.sim.render import SimConfig, render_frame
+
+    cfg = SimConfig(fps=fps, n_distractors=0, hot_pixels=0, occlusion=False)
+    rng = np.random.default_rng(seed)
+    paths = []
+    F, K = obs.points.shape[:2]
+    for cam in rig.cameras:
+        X = obs.points.reshape(-1, 3)
+        uv = cam.project(X).reshape(F, K, 2)
+        depth = cam.to_camera(X)[:, 2].reshape(F, K)
+        radius = cam.matrix[0, 0] * cfg.marker_radius_m / np.maximum(depth, 0.1)
+        vis = (depth > 0.1) & cam.in_image(uv.reshape(-1, 2)).reshape(F, K)
+        path = Path(out_dir) / f"{cam.name}.avi"
+        w, h = cam.size
+        writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*fourcc), fps, (w, h), isColor=False)
+        if not writer.isOpened():
+            raise OSError(f"cannot write {path} with codec {fourcc}")
+        try:
+            for f in range(F):
+                writer.write(render_frame(cam.size, uv[f], radius[f], vis[f], None, cfg, rng))
+        finally:
+            writer.release()
+        paths.append(path)
+    return paths
+
+
+def pose_errors(est: CameraRig, true: CameraRig, mode: str = "aligned") -> tuple[np.ndarray, np.ndarray]:
+    """Camera centre errors (C,) m and rotation errors (C,) deg of ``est`` against ``true``.
+
+    mode "aligned" (default): after the rigid motion that best maps the estimated camera
+    centres onto the true ones (least squares, no scale: the wand fixes the scale), i.e.
+    without the arbitrary choice of world frame; needs >= 3 cameras (else "relative").
+    "relative": each pose relative to the first camera (amplifies camera 0's rotation error
+    by the distances). "absolute": in the world frames as they are (includes the floor)."""
+    if mode == "aligned" and len(est) < 3:
+        mode = "relative"
+    ce, re = [], []
+    A = np.eye(3)
+    b = np.zeros(3)
+    if mode == "aligned":
+        P = np.stack([c.center for c in est.cameras])
+        Q = np.stack([c.center for c in true.cameras])
+        pc, qc = P.mean(axis=0), Q.mean(axis=0)
+        U, _, Vt = np.linalg.svd((P - pc).T @ (Q - qc))
+        D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+        A = Vt.T @ D @ U.T
+        b = qc - A @ pc
+    r0e, r0t = est.cameras[0], true.cameras[0]
+    for a, t in zip(est.cameras, true.cameras):
+        if mode == "relative":
+            Ra, Rb = a.R @ r0e.R.T, t.R @ r0t.R.T
+            ca, cb = r0e.R @ (a.center - r0e.center), r0t.R @ (t.center - r0t.center)
+        else:
+            Ra, Rb, ca, cb = a.R @ A.T, t.R, A @ a.center + b, t.center
+        ce.append(np.linalg.norm(ca - cb))
+        re.append(np.degrees(np.arccos(np.clip((np.trace(Ra @ Rb.T) - 1) / 2, -1, 1))))
+    return np.array(ce), np.array(re)

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from samba_common.calib import Camera, CameraRig, rotation_to_rvec
+from samba_common.calib import Camera, CameraRig
 from samba_server.calibrate.bundle import Observations, bundle_adjust, camera_from_pose, transform_rig
 from samba_server.triangulate import TriangulateConfig, Triangulator
 
@@ -72,7 +72,7 @@ def normalized(cam: Camera, uv: np.ndarray) -> np.ndarray:
 
 def _order_collinear(uv: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """Sort K >= 3 blobs of each view (F, C, K, 2) along the wand line (end to end)."""
-    c = np.nanmean(uv, axis=2, keepdims=True)
+    c = np.mean(uv, axis=2, keepdims=True)  # NaN views stay NaN and are sorted arbitrarily
     d = uv - c
     # principal direction per view
     cov = np.einsum("fcki,fckj->fcij", np.nan_to_num(d), np.nan_to_num(d))
@@ -83,7 +83,8 @@ def _order_collinear(uv: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     out = np.take_along_axis(uv, order[..., None], axis=2)
     # put the end nearer to the middle marker's offset side first, like ``offsets``
     mid_off = (offsets[1] - offsets[0]) / (offsets[-1] - offsets[0])
-    seg = np.linalg.norm(out[:, :, 1] - out[:, :, 0], axis=-1) / np.linalg.norm(out[:, :, -1] - out[:, :, 0], axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        seg = np.linalg.norm(out[:, :, 1] - out[:, :, 0], axis=-1) / np.linalg.norm(out[:, :, -1] - out[:, :, 0], axis=-1)
     flip = np.abs(seg - mid_off) > np.abs((1 - seg) - mid_off)
     out[flip] = out[flip][:, ::-1]
     return out
@@ -93,36 +94,44 @@ def _triangulator(cams: list[Camera]) -> Triangulator:
     return Triangulator(CameraRig(cams), TriangulateConfig(max_error_px=1e9, iterations=2))
 
 
-def _resolve(cams: list[Camera | None], uv: np.ndarray, symmetric: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Choose per frame the end labelling in each posed view that fits best.
+def _resolve(cams: list[Camera | None], uv: np.ndarray,
+             perms: list[tuple[int, ...]] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Choose per frame the marker order in each posed view that fits best.
 
-    cams: (C,) posed cameras or None; uv (F, C, K, 2). Returns uv with the chosen orders,
-    points (F, K, 3) (NaN where < 2 posed views) and rms (F,) px."""
+    cams: (C,) posed cameras or None; uv (F, C, K, 2). ``perms``: candidate orders of the K
+    blobs of a view (default: as is and reversed, i.e. the two ends of a wand); every
+    combination over the posed views is tried (the first posed view keeps its order).
+    Returns uv with the chosen orders, points (F, K, 3) (NaN where < 2 posed views) and
+    rms (F,) px."""
     F, C, Kw, _ = uv.shape
+    if perms is None:
+        perms = [tuple(range(Kw)), tuple(range(Kw))[::-1]]
     posed = [c for c in range(C) if cams[c] is not None]
     tri = _triangulator([cams[c] for c in posed])
     sub = uv[:, posed]
     best_cost = np.full(F, np.inf)
-    best = np.zeros((F, len(posed)), dtype=bool)
+    best = np.zeros((F, len(posed)), dtype=int)
     best_pts = np.full((F, Kw, 3), np.nan)
     best_rms = np.full(F, np.nan)
-    for bits in itertools.product((False, True), repeat=len(posed) - 1):
-        flips = np.array((False,) + bits)
-        u = sub.copy()
-        u[:, flips] = u[:, flips][:, :, ::-1]
+    for combo in itertools.product(range(len(perms)), repeat=len(posed) - 1):
+        choice = (0,) + combo
+        u = np.stack([sub[:, j][:, list(perms[k])] for j, k in enumerate(choice)], axis=1)
         res = tri.triangulate(u.transpose(1, 0, 2, 3).reshape(len(posed), F * Kw, 2))
         rms = res.error.reshape(F, Kw)
-        cost = np.nanmean(rms ** 2, axis=1) if Kw else np.zeros(F)
-        cost = np.where(np.all(np.isfinite(rms), axis=1), cost, np.inf)
+        fin = np.all(np.isfinite(rms), axis=1)
+        cost = np.full(F, np.inf)
+        cost[fin] = np.mean(rms[fin] ** 2, axis=1)
         better = cost < best_cost
         best_cost[better] = cost[better]
-        best[better] = flips
+        best[better] = choice
         best_pts[better] = res.points.reshape(F, Kw, 3)[better]
         best_rms[better] = np.sqrt(cost[better])
     out = uv.copy()
     for j, c in enumerate(posed):
-        f = best[:, j]
-        out[f, c] = out[f, c][:, ::-1]
+        for k, p in enumerate(perms):
+            f = best[:, j] == k
+            if k and f.any():
+                out[f, c] = uv[f, c][:, list(p)]
     return out, best_pts, best_rms
 
 
@@ -140,10 +149,28 @@ def _initial_pair(cams: list[Camera], xy: np.ndarray, seen: np.ndarray, i: int, 
     E, mask = cv2.findEssentialMat(p1, p2, np.eye(3), method=cv2.RANSAC, prob=0.9999, threshold=1.5 / f)
     if E is None or E.shape != (3, 3):
         raise CalibrateError(f"no essential matrix between {cams[i].name} and {cams[j].name}: degenerate wand motion")
+    # keep per frame the matching of the ends with the smaller epipolar error, then re-fit E
+    # on those correspondences only (no label outliers left)
+    n, Kw = len(both), a.shape[1]
+    h1 = np.concatenate([p1, np.ones((len(p1), 1))], axis=1)
+    h2 = np.concatenate([p2, np.ones((len(p2), 1))], axis=1)
+    Ex1, Etx2 = h1 @ E.T, h2 @ E
+    num = np.sum(h2 * Ex1, axis=1) ** 2
+    samp = num / (Ex1[:, 0] ** 2 + Ex1[:, 1] ** 2 + Etx2[:, 0] ** 2 + Etx2[:, 1] ** 2)
+    cost = samp.reshape(2, n, Kw).sum(axis=2)
+    pick = cost[1] < cost[0]
+    q2 = np.where(pick[:, None, None], b[:, ::-1], b)
+    p1, p2 = a.reshape(-1, 2), q2.reshape(-1, 2)
+    E, mask = cv2.findEssentialMat(p1, p2, np.eye(3), method=cv2.RANSAC, prob=0.9999, threshold=1.0 / f)
+    if E is None or E.shape != (3, 3):
+        raise CalibrateError(f"no essential matrix between {cams[i].name} and {cams[j].name}: degenerate wand motion")
+    E = E[:3]
     inl = mask.ravel().astype(bool)
     ok, R, t, _ = cv2.recoverPose(E, p1[inl], p2[inl], np.eye(3))
     log.info("pair %s-%s: %d frames, essential matrix inliers %d/%d", cams[i].name, cams[j].name,
              len(both), inl.sum(), len(inl))
+    if inl.sum() < 0.6 * len(inl):
+        raise CalibrateError(f"pair {cams[i].name}-{cams[j].name}: inconsistent epipolar geometry")
     return R, t.ravel()
 
 
@@ -167,11 +194,14 @@ def calibrate_wand(
     offsets: np.ndarray,
     min_frames: int = 20,
     max_error_px: float = 3.0,
+    max_tries: int = 4,
+    max_frames: int = 3000,
 ) -> tuple[CameraRig, WandReport]:
     """Extrinsics of all cameras of ``rig`` (intrinsics kept) from wand observations.
 
     uv: (F, C, K, 2) raw pixels, unlabelled per view, NaN where not seen; offsets: (K,)
-    metres of the markers along the wand (e.g. [0, 0.5]). Returns the calibrated rig in a
+    metres of the markers along the wand (e.g. [0, 0.5]); at most ``max_frames`` frames seen
+    by >= 2 cameras are used (evenly spread). Returns the calibrated rig in a
     provisional world frame (see module doc) and the report. Raises CalibrateError when the
     data cannot determine the answer.
     """
@@ -183,6 +213,12 @@ def calibrate_wand(
     L = float(offsets[-1] - offsets[0])
     uv = np.array(uv, dtype=float)
     seen = np.all(np.isfinite(uv), axis=(2, 3))
+    multi = np.flatnonzero(seen.sum(axis=1) >= 2)
+    if len(multi) > max_frames:  # bound the adjustment's size: keep evenly spread frames
+        keep = np.union1d(multi[np.linspace(0, len(multi) - 1, max_frames).round().astype(int)],
+                          np.flatnonzero(seen.sum(axis=1) < 2))
+        uv, seen = uv[keep], seen[keep]
+        log.info("using %d of %d multi-view wand frames", max_frames, len(multi))
     for c in range(C):
         if not seen[:, c].any():
             raise CalibrateError(f"camera {cams0[c].name} never saw the wand ({Kw} markers)")
@@ -190,24 +226,62 @@ def calibrate_wand(
         uv = _order_collinear(uv, offsets)
     xy = np.stack([normalized(cams0[c], uv[:, c]) for c in range(C)], axis=1)
     co = np.array([[np.sum(seen[:, a] & seen[:, b]) if a != b else 0 for b in range(C)] for a in range(C)])
-    i, j = np.unravel_index(np.argmax(co), co.shape)
+    pairs = sorted(((co[a, b], a, b) for a in range(C) for b in range(a + 1, C)), reverse=True)
+    if pairs[0][0] < min_frames:
+        a, b = pairs[0][1:]
+        raise CalibrateError(f"the best camera pair {cams0[a].name}-{cams0[b].name} shares only {pairs[0][0]} "
+                             f"wand frames (need >= {min_frames}): wave the wand where several cameras see it")
+    best = None
+    errors = []
+    for n, i, j in pairs[:max_tries]:
+        if n < min_frames:
+            break
+        try:
+            cams, uv_i, pts, rms = _initialise(cams0, uv, xy, seen, i, j, L, min_frames, max_error_px)
+            cams, pts, rep = _adjust(cams, uv_i, pts, rms, offsets, i, max_error_px)
+        except CalibrateError as exc:
+            errors.append(str(exc))
+            log.info("initialisation from %s-%s failed: %s", cams0[i].name, cams0[j].name, exc)
+            continue
+        r = rep["residuals"]
+        total = float(np.sqrt(np.mean(np.sum(r * r, axis=1)))) if len(r) else np.inf
+        nobs = len(r)
+        log.info("initialisation from %s-%s: rms %.3f px over %d observations", cams0[i].name, cams0[j].name,
+                 total, nobs)
+        key = (total > max_error_px / 3, -nobs, total)
+        if best is None or key < best[0]:
+            best = (key, cams, pts, rep, uv_i)
+        if total < max_error_px / 3 and nobs >= 0.8 * int(np.sum(seen)) * Kw:
+            break
+    if best is None or best[0][0]:
+        raise CalibrateError("no consistent calibration: " + ("; ".join(errors) or "reprojection errors stay large"))
+    _, cams, pts, rep, uv = best
+    cams = _scale_and_world(cams, pts[np.all(np.isfinite(pts), axis=2)].reshape(-1, 3))
+    out = CameraRig(cams, dict(rig.metadata))
+    return out, _report(out, uv, offsets, rep)
+
+
+def _initialise(cams0, uv, xy, seen, i, j, L, min_frames, max_error_px):
+    """Poses of all cameras from pair (i, j) then PnP; returns cams, labelled uv, points, rms."""
+    C = len(cams0)
+    Kw = uv.shape[2]
     R, t = _initial_pair(cams0, xy, seen, int(i), int(j), min_frames)
     posed: list[Camera | None] = [None] * C
     posed[i] = camera_from_pose(cams0[i], np.eye(3), np.zeros(3))
     posed[j] = camera_from_pose(cams0[j], R, t)
-    uv, pts, rms = _resolve(posed, uv, symmetric=Kw == 2)
+    uv, pts, rms = _resolve(posed, uv)
     good = np.isfinite(rms) & (rms < 5 * max_error_px)
+    if good.sum() < min_frames:
+        raise CalibrateError(f"pair {cams0[i].name}-{cams0[j].name}: only {int(good.sum())} frames fit the initial geometry")
     lengths = np.linalg.norm(pts[good, -1] - pts[good, 0], axis=1)
-    if not len(lengths):
-        raise CalibrateError("no wand frame could be triangulated from the first camera pair")
     s = L / np.median(lengths)
     posed[j] = camera_from_pose(cams0[j], R, t * s)
     while any(p is None for p in posed):
-        uv, pts, rms = _resolve(posed, uv, symmetric=Kw == 2)
+        uv, pts, rms = _resolve(posed, uv)
         have = np.isfinite(rms) & (rms < 5 * max_error_px)
         cand = [(int(np.sum(have & seen[:, c])), c) for c in range(C) if posed[c] is None]
         n, c = max(cand)
-        if n < min_frames // 2:
+        if n < max(min_frames // 2, 6):
             names = [cams0[k].name for k in range(C) if posed[k] is None]
             raise CalibrateError(f"camera(s) {names} share too few wand frames ({n}) with the calibrated cameras")
         fr = np.flatnonzero(have & seen[:, c])
@@ -216,19 +290,17 @@ def calibrate_wand(
         f = cams0[c].matrix[0, 0]
         ok, rv, tv, inl = cv2.solvePnPRansac(obj, img, np.eye(3), None, iterationsCount=2000,
                                              reprojectionError=2.0 / f, confidence=0.9999, flags=cv2.SOLVEPNP_EPNP)
-        if not ok or inl is None or len(inl) < 6:
-            raise CalibrateError(f"camera {cams0[c].name}: no consistent pose from {n} shared wand frames")
+        if not ok or inl is None or len(inl) < 0.6 * n * Kw:
+            raise CalibrateError(f"camera {cams0[c].name}: no consistent pose from {n} shared wand frames "
+                                 f"({0 if inl is None else len(inl)} inliers)")
         inl = inl.ravel()
         ok, rv, tv = cv2.solvePnP(obj[inl], img[inl], np.eye(3), None, rv, tv, True, cv2.SOLVEPNP_ITERATIVE)
         posed[c] = Camera(cams0[c].name, cams0[c].size, cams0[c].matrix.copy(), cams0[c].dist.copy(),
                           rv.ravel(), tv.ravel())
         log.info("camera %s: PnP from %d frames, %d/%d inliers", cams0[c].name, n, len(inl), len(obj))
     cams = [p for p in posed if p is not None]
-    uv, pts, rms = _resolve(cams, uv, symmetric=Kw == 2)
-    cams, pts, rep = _adjust(cams, uv, pts, rms, offsets, int(i), max_error_px)
-    cams = _scale_and_world(cams, pts.reshape(-1, 3))
-    out = CameraRig(cams, dict(rig.metadata))
-    return out, _report(out, uv, offsets, rep)
+    uv, pts, rms = _resolve(cams, uv)
+    return cams, uv, pts, rms
 
 
 def _adjust(cams, uv, pts, rms, offsets, ref, max_error_px):
@@ -294,4 +366,4 @@ def _report(rig: CameraRig, uv: np.ndarray, offsets: np.ndarray, rep: dict) -> W
     return WandReport(rms, nobs, float(np.mean(lengths)), float(np.std(lengths)), len(fr), cov, pairs)
 
 
-__all__ = ["CalibrateError", "WandReport", "calibrate_wand", "normalized", "rotation_to_rvec"]
+__all__ = ["CalibrateError", "WandReport", "calibrate_wand", "normalized"]

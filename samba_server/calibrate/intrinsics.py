@@ -1,0 +1,201 @@
+"""Intrinsics (K, distortion) from checkerboard or ChArUco views: OpenCV calibrateCamera.
+
+Board specs (command line ``--board``):
+
+* ``checkerboard:COLSxROWS:SQUARE`` - inner corners per row x per column, square side in m
+  (``checkerboard:9x6:0.025``);
+* ``charuco:SQX x SQY:SQUARE:MARKER[:DICT]`` - squares, square and marker side in m, ArUco
+  dictionary name (default ``DICT_4X4_50``), e.g. ``charuco:5x7:0.04:0.03``.
+
+SOURCE is a directory of images, a video file (every ``step``-th frame) or a glob pattern.
+"""
+
+from __future__ import annotations
+
+import glob
+import logging
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import cv2
+import numpy as np
+
+from samba_common.calib import Camera
+
+log = logging.getLogger(__name__)
+
+_IMAGE_EXT = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm"}
+
+
+class BoardError(ValueError):
+    """A board specification is malformed."""
+
+
+@dataclass(frozen=True)
+class Board:
+    kind: str  #: "checkerboard" or "charuco"
+    cols: int  #: inner corners (checkerboard) or squares (charuco) along x
+    rows: int
+    square: float  #: m
+    marker: float = 0.0  #: m (charuco)
+    dictionary: str = "DICT_4X4_50"
+
+    @classmethod
+    def parse(cls, spec: str) -> "Board":
+        parts = spec.split(":")
+        try:
+            kind = parts[0].lower()
+            cols, rows = (int(v) for v in parts[1].lower().split("x"))
+            square = float(parts[2])
+            if kind == "checkerboard" and len(parts) == 3:
+                board = cls(kind, cols, rows, square)
+            elif kind == "charuco" and len(parts) in (4, 5):
+                board = cls(kind, cols, rows, square, float(parts[3]), parts[4] if len(parts) == 5 else "DICT_4X4_50")
+            else:
+                raise ValueError
+        except (ValueError, IndexError):
+            raise BoardError(f"bad board {spec!r}: expected checkerboard:COLSxROWS:SQUARE or "
+                             "charuco:SQXxSQY:SQUARE:MARKER[:DICT]") from None
+        if min(board.cols, board.rows) < 2 or board.square <= 0:
+            raise BoardError(f"bad board {spec!r}: need >= 2x2 and a positive square size")
+        if kind == "charuco" and not 0 < board.marker < board.square:
+            raise BoardError(f"bad board {spec!r}: marker size must be between 0 and the square size")
+        if kind == "charuco" and not hasattr(cv2.aruco, board.dictionary):
+            raise BoardError(f"bad board {spec!r}: unknown ArUco dictionary {board.dictionary}")
+        return board
+
+    def object_points(self) -> np.ndarray:
+        """Checkerboard inner corners (N, 3) m in the board plane, OpenCV order."""
+        g = np.mgrid[0:self.cols, 0:self.rows].T.reshape(-1, 2)
+        return np.hstack([g * self.square, np.zeros((len(g), 1))]).astype(np.float32)
+
+
+def iter_frames(source: str | os.PathLike, step: int = 1) -> Iterator[tuple[str, np.ndarray]]:
+    """(name, (H, W) uint8 grey) for a directory of images, a video or a glob pattern."""
+    p = Path(source)
+    if p.is_dir():
+        files = sorted(f for f in p.iterdir() if f.suffix.lower() in _IMAGE_EXT)
+    elif p.is_file() and p.suffix.lower() in _IMAGE_EXT:
+        files = [p]
+    elif p.is_file():
+        cap = cv2.VideoCapture(str(p))
+        if not cap.isOpened():
+            raise FileNotFoundError(f"{p}: cannot open as a video")
+        i = 0
+        try:
+            while True:
+                ok, img = cap.read()
+                if not ok:
+                    break
+                if i % step == 0:
+                    yield f"{p.name}#{i}", img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+                i += 1
+        finally:
+            cap.release()
+        return
+    else:
+        files = [Path(f) for f in sorted(glob.glob(str(source)))]
+    if not files:
+        raise FileNotFoundError(f"{source}: no images found")
+    for f in files[::step]:
+        img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            log.warning("%s: not an image, skipped", f)
+            continue
+        yield f.name, img
+
+
+def detect(board: Board, img: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Board corners in one image -> (object points (N, 3), image points (N, 2)) or None."""
+    if board.kind == "checkerboard":
+        flags = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+        ok, corners = cv2.findChessboardCorners(img, (board.cols, board.rows), flags=flags)
+        if not ok:
+            return None
+        corners = cv2.cornerSubPix(img, corners, (3, 3), (-1, -1),
+                                   (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-3))
+        return board.object_points(), corners.reshape(-1, 2)
+    d = cv2.aruco.getPredefinedDictionary(getattr(cv2.aruco, board.dictionary))
+    cb = cv2.aruco.CharucoBoard((board.cols, board.rows), board.square, board.marker, d)
+    corners, ids, _, _ = cv2.aruco.CharucoDetector(cb).detectBoard(img)
+    if ids is None or len(ids) < 6:
+        return None
+    obj = cb.getChessboardCorners()[ids.ravel()]
+    return obj.astype(np.float32), corners.reshape(-1, 2)
+
+
+@dataclass
+class IntrinsicsResult:
+    camera: Camera
+    rms_px: float  #: calibrateCamera reprojection rms
+    n_views: int  #: views with a detected board
+    n_frames: int  #: frames read
+    coverage: float  #: fraction of 8x6 image cells holding a detected corner
+
+
+def calibrate_intrinsics(name: str, source: str | os.PathLike, board: Board, step: int = 1,
+                         max_views: int = 60, fix_k3: bool = True, progress=None) -> IntrinsicsResult:
+    """Calibrate one camera's K and distortion from board views; raises ValueError when the
+    board was found in fewer than 4 views."""
+    objs, imgs, size, n = [], [], None, 0
+    for _, img in iter_frames(source, step):
+        n += 1
+        size = (img.shape[1], img.shape[0])
+        got = detect(board, img)
+        if got is not None:
+            objs.append(got[0])
+            imgs.append(got[1].astype(np.float32))
+        if progress is not None:
+            progress(n)
+    if size is None:
+        raise ValueError(f"{source}: no frames")
+    if len(objs) < 4:
+        raise ValueError(f"{source}: board found in {len(objs)} of {n} frames; need >= 4 views at varied angles")
+    if len(objs) > max_views:
+        keep = np.linspace(0, len(objs) - 1, max_views).round().astype(int)
+        objs, imgs = [objs[k] for k in keep], [imgs[k] for k in keep]
+    flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
+    rms, K, dist, _, _ = cv2.calibrateCamera(objs, imgs, size, None, None, flags=flags)
+    w, h = size
+    allp = np.concatenate(imgs)
+    cells = {(int(u * 8 // w), int(v * 6 // h)) for u, v in allp if 0 <= u < w and 0 <= v < h}
+    cam = Camera(name, size, K, np.asarray(dist, float).ravel()[:5])
+    log.info("%s: rms %.3f px from %d views, coverage %.0f %%", name, rms, len(objs), 100 * len(cells) / 48)
+    return IntrinsicsResult(cam, float(rms), len(objs), n, len(cells) / 48.0)
+
+
+def render_board_views(camera: Camera, board: Board, n_views: int = 12, seed: int = 0,
+                       supersample: int = 2) -> list[np.ndarray]:
+    """Synthetic checkerboard images (H, W) uint8 seen by ``camera`` (with its distortion),
+    the board at varied poses 0.6-1.2 m away; for tests and ``simulate board``."""
+    from samba_common.calib import rodrigues
+
+    rng = np.random.default_rng(seed)
+    w, h = camera.size
+    s = supersample
+    uu, vv = np.meshgrid((np.arange(w * s) + 0.5) / s - 0.5, (np.arange(h * s) + 0.5) / s - 0.5)
+    xy = camera.undistort_normalized(np.stack([uu.ravel(), vv.ravel()], axis=1))
+    rays = np.hstack([xy, np.ones((len(xy), 1))])
+    bw, bh = (board.cols + 1) * board.square, (board.rows + 1) * board.square
+    out = []
+    for _ in range(n_views):
+        R = rodrigues(rng.uniform(-0.5, 0.5, 3) * [1, 1, 0.4])
+        dist = rng.uniform(0.5, 0.8) * board.square / 0.025 * 0.35
+        shift = rng.uniform(-0.12, 0.12, 2) * dist
+        t = np.array([shift[0], shift[1], dist])
+        # board plane point: X = R @ (b - c) + t with b in board coords, c = board centre
+        n = R[:, 2]
+        lam = (n @ t) / (rays @ n)
+        P = rays * lam[:, None] - t
+        b = P @ R  # board coordinates relative to the centre
+        bx, by = b[:, 0] + bw / 2 - board.square, b[:, 1] + bh / 2 - board.square
+        ix, iy = np.floor(bx / board.square + 1), np.floor(by / board.square + 1)
+        inside = (ix >= 0) & (ix <= board.cols) & (iy >= 0) & (iy <= board.rows) & (lam > 0)
+        val = np.where(inside, np.where((ix + iy) % 2 == 0, 20.0, 230.0), 230.0)
+        margin = (bx > -1.6 * board.square) & (bx < bw - 0.4 * board.square) & (by > -1.6 * board.square) & (by < bh - 0.4 * board.square)
+        val = np.where(margin | inside, val, 90.0)
+        img = val.reshape(h * s, w * s).reshape(h, s, w, s).mean(axis=(1, 3))
+        out.append(np.clip(np.rint(img + rng.normal(0, 1.0, img.shape)), 0, 255).astype(np.uint8))
+    return out

@@ -1,0 +1,587 @@
+"""Compiled (numba) kernels of the per-frame solve: pseudo-poses, local prior, linear start, LM.
+
+Array conventions follow :mod:`samba_common.body`: bone directions (11, 3) in the torso frame,
+``BONE_DIRS`` order; bone lengths (8,), ``BONE_TYPES`` order; joints (13, 3), ``JOINT_NAMES``
+order; torso rotation ``R`` (3, 3) with the torso axes as columns; metres.
+
+The energy minimised by :func:`lm_solve` is
+
+    |W (v(state) - mu)|^2 + sum_seen |(q_m - x_m) / sigma_m|^2 + [smooth] sum_j |(q_j - target_j) / sigma_s|^2
+
+where v is the 39-vector (vec(dirs), torso y and z axes in the marker body frame ``RA``), q the
+world joints and target the constant-velocity prediction (second difference of the pose).
+The tangent step has 27 entries: rotation vector (3), translation (3), then two tangent angles
+per bone except the spine, which only leans in the torso's x-y plane (see :func:`param_col`).
+
+Everything here is compiled once (``cache=True`` stores the machine code next to the module).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+N_BONES = 11
+N_PARAMS = 27
+N_POSE = 39
+N_ANGLES = 17  # neck 2, spine 1, pelvis 2, 4 limbs x (ball 2 + hinge 1)
+
+# bone directions
+NECK, PELVIS, SPINE, LUA, RUA, LFA, RFA, LTH, RTH, LSH, RSH = range(11)
+# joints
+HEAD, LS, RS, LE, RE, LW, RW, LH, RH, LK, RK, LA, RA = range(13)
+MARKER_JOINTS = np.array([LS, RS, LW, RW, LK, RK, LA, RA])
+# bone type of each direction (index into the 8 lengths)
+BONE_LENGTH = np.array([3, 1, 2, 4, 4, 5, 5, 6, 6, 7, 7])
+# limbs: (upper bone, lower bone)
+LIMB_BONES = np.array([[LUA, LFA], [RUA, RFA], [LTH, LSH], [RTH, RSH]])
+
+
+def incidence() -> np.ndarray:
+    """G (13, 12): body joints = G @ [half shoulder line; L_b d_b for the 11 bones]."""
+    G = np.zeros((13, 12))
+    G[LS, 0], G[RS, 0], G[HEAD, 1 + NECK] = 1.0, -1.0, 1.0
+    G[LH, 1 + SPINE] = G[RH, 1 + SPINE] = 1.0
+    G[LH, 1 + PELVIS], G[RH, 1 + PELVIS] = 0.5, -0.5
+    for a, b, c, up, lo in ((LS, LE, LW, LUA, LFA), (RS, RE, RW, RUA, RFA), (LH, LK, LA, LTH, LSH), (RH, RK, RA, RTH, RSH)):
+        G[b] = G[a]
+        G[b, 1 + up] = 1.0
+        G[c] = G[b]
+        G[c, 1 + lo] = 1.0
+    return G
+
+
+G = incidence()
+
+
+@njit(cache=True)
+def param_col(b: int, k: int) -> int:
+    """Column of tangent angle k (0/1) of bone b in the 27-parameter step (-1: not a parameter)."""
+    if b < SPINE:
+        return 6 + 2 * b + k
+    if b == SPINE:
+        return 10 if k == 0 else -1
+    return 6 + 2 * b + k - 1
+
+
+@njit(cache=True)
+def _cross(a, b):
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+@njit(cache=True)
+def _normalize(v):
+    n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    if n < 1e-12:
+        return v.copy()
+    return v / n
+
+
+@njit(cache=True)
+def _rot3cs(v0, v1, v2, a0, a1, a2, c, s):
+    """Rodrigues rotation of (v0, v1, v2) about the unit axis (a0, a1, a2), given cos and sin."""
+    d = (a0 * v0 + a1 * v1 + a2 * v2) * (1.0 - c)
+    return (v0 * c + (a1 * v2 - a2 * v1) * s + a0 * d,
+            v1 * c + (a2 * v0 - a0 * v2) * s + a1 * d,
+            v2 * c + (a0 * v1 - a1 * v0) * s + a2 * d)
+
+
+@njit(cache=True)
+def _unit3(x, y, z):
+    n = math.sqrt(x * x + y * y + z * z)
+    if n < 1e-12:
+        return x, y, z
+    return x / n, y / n, z / n
+
+
+@njit(cache=True)
+def _ball_axis(d0, d1, d2):
+    """Tilt axis of a ball joint (thesis eq. 4.10: R1 = Z x X, X = shoulder line made orthogonal
+    to the bone Z); the forward axis stands in when the bone lies along the shoulder line."""
+    x0, x1, x2 = 1.0 - d0 * d0, -d0 * d1, -d0 * d2
+    if x0 * x0 + x1 * x1 + x2 * x2 < 1e-12:
+        x0, x1, x2 = -d2 * d0, -d2 * d1, 1.0 - d2 * d2
+    x0, x1, x2 = _unit3(x0, x1, x2)
+    return _unit3(d1 * x2 - d2 * x1, d2 * x0 - d0 * x2, d0 * x1 - d1 * x0)
+
+
+@njit(cache=True)
+def _ball(d, b, c1, s1, c2, s2):
+    """Rotate bone b of d (11, 3) by a tilt (cos c1, sin s1) about its ball axis, then a turn
+    (c2, s2) about the bone."""
+    z0, z1, z2 = d[b, 0], d[b, 1], d[b, 2]
+    r0, r1, r2 = _ball_axis(z0, z1, z2)
+    v0, v1, v2 = _rot3cs(z0, z1, z2, r0, r1, r2, c1, s1)
+    d[b, 0], d[b, 1], d[b, 2] = _rot3cs(v0, v1, v2, z0, z1, z2, c2, s2)
+
+
+@njit(cache=True)
+def _trunk_noise(d, c, s):
+    """Neck ball, spine lean and pelvis turn/tilt noise on directions d (11, 3), in place;
+    c, s: (17,) cosines and sines of the noise angles."""
+    _ball(d, NECK, c[0], s[0], c[1], s[1])
+    d[SPINE, 0], d[SPINE, 1], d[SPINE, 2] = _rot3cs(d[SPINE, 0], d[SPINE, 1], d[SPINE, 2], 0.0, 0.0, 1.0, c[2], s[2])
+    s0, s1, s2 = _unit3(d[SPINE, 0], d[SPINE, 1], d[SPINE, 2])
+    v0, v1, v2 = _rot3cs(d[PELVIS, 0], d[PELVIS, 1], d[PELVIS, 2], s0, s1, s2, c[3], s[3])
+    d[PELVIS, 0], d[PELVIS, 1], d[PELVIS, 2] = _rot3cs(v0, v1, v2, 0.0, 0.0, 1.0, c[4], s[4])
+
+
+@njit(cache=True)
+def pseudo_pool(db_dirs, nbr, cos_a, sin_a, out, trunk=True, limb_lo=0, limb_hi=4):
+    """Fill out (K*(N+1), 11, 3) with each neighbour's directions followed by N pseudo-poses.
+
+    db_dirs: (M, 11, 3) float32 database; nbr: (K,) indices; cos_a, sin_a: (N, 17) cosines and
+    sines of the noise angles (a fixed bank, so the result is deterministic). Limb roots are 2-DOF balls carrying the lower bone; elbows
+    and knees are hinges about the limb-plane normal; neck and pelvis are balls, the spine leans
+    about the torso's forward axis, the pelvis also turns about the spine. Only the trunk (neck,
+    spine, pelvis) when ``trunk`` and limbs limb_lo..limb_hi-1 (0 left arm, 1 right arm, 2 left
+    leg, 3 right leg) are perturbed: a body part's prior needs only its own bones.
+    """
+    K, N = nbr.shape[0], cos_a.shape[0]
+    p = 0
+    for i in range(K):
+        for b in range(11):
+            for c in range(3):
+                out[p, b, c] = db_dirs[nbr[i], b, c]
+        base = p
+        p += 1
+        for n in range(N):
+            d = out[p]
+            d[:] = out[base]
+            c, s = cos_a[n], sin_a[n]
+            if trunk:
+                _trunk_noise(d, c, s)
+            for limb in range(limb_lo, limb_hi):
+                u, lo = LIMB_BONES[limb, 0], LIMB_BONES[limb, 1]
+                k = 5 + 3 * limb
+                u0, u1, u2 = d[u, 0], d[u, 1], d[u, 2]
+                h0, h1, h2 = u1 * d[lo, 2] - u2 * d[lo, 1], u2 * d[lo, 0] - u0 * d[lo, 2], u0 * d[lo, 1] - u1 * d[lo, 0]
+                if h0 * h0 + h1 * h1 + h2 * h2 < 1e-6:  # straight limb: bend about the ball axis
+                    h0, h1, h2 = _ball_axis(u0, u1, u2)
+                h0, h1, h2 = _unit3(h0, h1, h2)
+                l0, l1, l2 = _rot3cs(d[lo, 0], d[lo, 1], d[lo, 2], h0, h1, h2, c[k + 2], s[k + 2])  # hinge
+                r0, r1, r2 = _ball_axis(u0, u1, u2)
+                v0, v1, v2 = _rot3cs(u0, u1, u2, r0, r1, r2, c[k], s[k])                     # ball, upper
+                d[u, 0], d[u, 1], d[u, 2] = _rot3cs(v0, v1, v2, u0, u1, u2, c[k + 1], s[k + 1])
+                v0, v1, v2 = _rot3cs(l0, l1, l2, r0, r1, r2, c[k], s[k])                     # ball carries lower
+                d[lo, 0], d[lo, 1], d[lo, 2] = _rot3cs(v0, v1, v2, u0, u1, u2, c[k + 1], s[k + 1])
+            p += 1
+
+
+@njit(cache=True)
+def body_joints(dirs, lengths, out):
+    """Torso-frame joints out (13, 3) of directions (11, 3) and lengths (8,)."""
+    hs = 0.5 * lengths[0]
+    for c in range(3):
+        out[LS, c] = 0.0
+        out[RS, c] = 0.0
+    out[LS, 0] = hs
+    out[RS, 0] = -hs
+    for c in range(3):
+        out[HEAD, c] = lengths[3] * dirs[NECK, c]
+        hm = lengths[2] * dirs[SPINE, c]
+        out[LH, c] = hm + 0.5 * lengths[1] * dirs[PELVIS, c]
+        out[RH, c] = hm - 0.5 * lengths[1] * dirs[PELVIS, c]
+        out[LE, c] = out[LS, c] + lengths[4] * dirs[LUA, c]
+        out[LW, c] = out[LE, c] + lengths[5] * dirs[LFA, c]
+        out[RE, c] = out[RS, c] + lengths[4] * dirs[RUA, c]
+        out[RW, c] = out[RE, c] + lengths[5] * dirs[RFA, c]
+        out[LK, c] = out[LH, c] + lengths[6] * dirs[LTH, c]
+        out[LA, c] = out[LK, c] + lengths[7] * dirs[LSH, c]
+        out[RK, c] = out[RH, c] + lengths[6] * dirs[RTH, c]
+        out[RA, c] = out[RK, c] + lengths[7] * dirs[RSH, c]
+
+
+@njit(cache=True)
+def marker_axes(m):
+    """Marker body frame (3, 3) (columns x, y, z) of 8 markers (8, 3) in any coordinates:
+    x = right->left shoulder, y = up from the ankle (else knee) midpoint, else world Z, else
+    world Y (the first with at least 20 % of its length orthogonal to x), z = x cross y."""
+    x0, x1, x2 = _unit3(m[0, 0] - m[1, 0], m[0, 1] - m[1, 1], m[0, 2] - m[1, 2])
+    y0, y1, y2 = 0.0, 1.0, 0.0
+    for cand in range(4):
+        if cand < 2:
+            a, b = (6, 7) if cand == 0 else (4, 5)
+            u0 = 0.5 * (m[0, 0] + m[1, 0] - m[a, 0] - m[b, 0])
+            u1 = 0.5 * (m[0, 1] + m[1, 1] - m[a, 1] - m[b, 1])
+            u2 = 0.5 * (m[0, 2] + m[1, 2] - m[a, 2] - m[b, 2])
+        elif cand == 2:
+            u0, u1, u2 = 0.0, 0.0, 1.0
+        else:
+            u0, u1, u2 = 0.0, 1.0, 0.0
+        dot = u0 * x0 + u1 * x1 + u2 * x2
+        p0, p1, p2 = u0 - dot * x0, u1 - dot * x1, u2 - dot * x2
+        pn = math.sqrt(p0 * p0 + p1 * p1 + p2 * p2)
+        if pn >= 0.2 * math.sqrt(u0 * u0 + u1 * u1 + u2 * u2) and pn > 1e-9:
+            y0, y1, y2 = p0 / pn, p1 / pn, p2 / pn
+            break
+    A = np.empty((3, 3))
+    A[0, 0], A[1, 0], A[2, 0] = x0, x1, x2
+    A[0, 1], A[1, 1], A[2, 1] = y0, y1, y2
+    A[0, 2], A[1, 2], A[2, 2] = x1 * y2 - x2 * y1, x2 * y0 - x0 * y2, x0 * y1 - x1 * y0
+    return A
+
+
+@njit(cache=True)
+def pose_vectors(pool, lengths, X, frame=True):
+    """X (P, 39): vec(dirs) and (when ``frame``) the torso y, z axes in each pose's marker body frame."""
+    body = np.empty((13, 3))
+    m = np.empty((8, 3))
+    for p in range(pool.shape[0]):
+        for b in range(11):
+            for c in range(3):
+                X[p, 3 * b + c] = pool[p, b, c]
+        if not frame:
+            continue
+        body_joints(pool[p], lengths, body)
+        for i in range(8):
+            m[i] = body[MARKER_JOINTS[i]]
+        y0, y1, y2, z0, z1, z2 = _frame_rows(m)
+        X[p, 33], X[p, 34], X[p, 35] = y0, y1, y2
+        X[p, 36], X[p, 37], X[p, 38] = z0, z1, z2
+
+
+@njit(cache=True)
+def _frame_rows(m):
+    """Rows 1 and 2 of the marker axes matrix of markers m (8, 3) (see :func:`marker_axes`):
+    the torso y and z axes expressed in the marker frame, when m is in torso coordinates."""
+    A = marker_axes(m)
+    return A[1, 0], A[1, 1], A[1, 2], A[2, 0], A[2, 1], A[2, 2]
+
+
+@njit(cache=True)
+def gaussian_block(X, dims, floor2, weight, mu, W):
+    """Local PCA prior of the pose-vector entries ``dims``: writes their mean into mu (39,) and
+    the whitening block sqrt(weight) L^-1 into W (39, 39), where L L^T = C + floor2 I and C is
+    the covariance of the pooled poses X (P, 39) (the eigen-structure of C is the local PCA;
+    floor2 keeps directions the pool does not span from being forbidden)."""
+    P, d = X.shape[0], dims.shape[0]
+    sub = np.empty((d, P))
+    for i in range(d):
+        col = dims[i]
+        m = 0.0
+        for p in range(P):
+            m += X[p, col]
+        m /= P
+        mu[col] = m
+        for p in range(P):
+            sub[i, p] = X[p, col] - m
+    C = np.empty((d, d))
+    scale = 1.0 / max(P - 1, 1)
+    for i in range(d):
+        for j in range(i + 1):
+            acc = 0.0
+            for p in range(P):
+                acc += sub[i, p] * sub[j, p]
+            C[i, j] = acc * scale
+            C[j, i] = C[i, j]
+        C[i, i] += floor2
+    Lc = np.linalg.cholesky(C)
+    # inverse of the lower-triangular factor by forward substitution
+    Li = np.zeros((d, d))
+    for j in range(d):
+        Li[j, j] = 1.0 / Lc[j, j]
+        for i in range(j + 1, d):
+            acc = 0.0
+            for m in range(j, i):
+                acc += Lc[i, m] * Li[m, j]
+            Li[i, j] = -acc / Lc[i, i]
+    sw = math.sqrt(weight)
+    for i in range(d):
+        for j in range(d):
+            W[dims[i], dims[j]] = Li[i, j] * sw
+
+
+@njit(cache=True)
+def linear_start(pool, lengths, obs_torso, seen):
+    """The thesis' start: directions (11, 3) blending the pool so its markers best match the
+    observed markers ``obs_torso`` (8, 3) (torso coordinates of the reference pose; rows where
+    ``seen`` is False are ignored) in the ridge-regularised least-squares sense."""
+    P = pool.shape[0]
+    n_seen = 0
+    for i in range(8):
+        if seen[i]:
+            n_seen += 1
+    A = np.empty((3 * n_seen, P))
+    b = np.empty(3 * n_seen)
+    body = np.empty((13, 3))
+    for p in range(P):
+        body_joints(pool[p], lengths, body)
+        r = 0
+        for i in range(8):
+            if seen[i]:
+                for c in range(3):
+                    A[r, p] = body[MARKER_JOINTS[i], c]
+                    r += 1
+    r = 0
+    for i in range(8):
+        if seen[i]:
+            for c in range(3):
+                b[r] = obs_torso[i, c]
+                r += 1
+    AAt = np.dot(A, A.T)
+    lam = 1e-3 * np.trace(AAt) / max(3 * n_seen, 1) + 1e-12
+    for i in range(3 * n_seen):
+        AAt[i, i] += lam
+    gamma = np.dot(A.T, np.linalg.solve(AAt, b))
+    d = np.zeros((11, 3))
+    for p in range(P):
+        d += gamma[p] * pool[p]
+    for bone in range(11):
+        n = math.sqrt(d[bone, 0] ** 2 + d[bone, 1] ** 2 + d[bone, 2] ** 2)
+        if n > 1e-6:
+            d[bone] /= n
+        else:
+            d[bone] = pool[0, bone]
+    d[SPINE, 2] = 0.0
+    d[SPINE] = _normalize(d[SPINE])
+    return d
+
+
+@njit(cache=True)
+def _tangents(dirs):
+    T = np.empty((11, 2, 3))
+    for b in range(11):
+        d = dirs[b]
+        if b == SPINE:
+            e1 = _normalize(np.array([-d[1], d[0], 0.0]))  # z x d
+        else:
+            hlp = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+            e1 = _normalize(hlp - (hlp[0] * d[0] + hlp[1] * d[1] + hlp[2] * d[2]) * d)
+        T[b, 0] = e1
+        T[b, 1] = _cross(d, e1)
+    return T
+
+
+@njit(cache=True)
+def _world(R, o, dirs, lengths, q):
+    body = np.empty((13, 3))
+    body_joints(dirs, lengths, body)
+    for j in range(13):
+        for i in range(3):
+            q[j, i] = o[i] + R[i, 0] * body[j, 0] + R[i, 1] * body[j, 1] + R[i, 2] * body[j, 2]
+    return body
+
+
+@njit(cache=True)
+def _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r):
+    _world(R, o, dirs, lengths, q)
+    v = np.empty(39)
+    for b in range(11):
+        for c in range(3):
+            v[3 * b + c] = dirs[b, c] - mu[3 * b + c]
+    M = np.dot(RA.T, R)
+    for c in range(3):
+        v[33 + c] = M[c, 1] - mu[33 + c]
+        v[36 + c] = M[c, 2] - mu[36 + c]
+    r[:39] = np.dot(W, v)
+    k = 39
+    for i in range(8):
+        if seen[i]:
+            for c in range(3):
+                r[k] = (q[MARKER_JOINTS[i], c] - obs[i, c]) / sigma_m
+                k += 1
+    if smooth:
+        for j in range(13):
+            for c in range(3):
+                r[k] = (q[j, c] - target[j, c]) / sigma_s
+                k += 1
+    cost = 0.0
+    for i in range(r.shape[0]):
+        cost += r[i] * r[i]
+    return cost
+
+
+@njit(cache=True)
+def _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm):
+    body = np.empty((13, 3))
+    body_joints(dirs, lengths, body)
+    Jq = np.zeros((13, 3, 27))
+    for j in range(13):
+        for k in range(3):  # rotation: R (e_k x b)
+            e = np.zeros(3)
+            e[k] = 1.0
+            cb = _cross(e, body[j])
+            for i in range(3):
+                Jq[j, i, k] = R[i, 0] * cb[0] + R[i, 1] * cb[1] + R[i, 2] * cb[2]
+            Jq[j, k, 3 + k] = 1.0
+    for b in range(11):
+        L = lengths[BONE_LENGTH[b]]
+        for kk in range(2):
+            col = param_col(b, kk)
+            if col < 0:
+                continue
+            wt = np.empty(3)
+            for i in range(3):
+                wt[i] = L * (R[i, 0] * T[b, kk, 0] + R[i, 1] * T[b, kk, 1] + R[i, 2] * T[b, kk, 2])
+            for j in range(13):
+                g = Gm[j, 1 + b]
+                if g != 0.0:
+                    for i in range(3):
+                        Jq[j, i, col] = g * wt[i]
+    Jv = np.zeros((39, 27))
+    for b in range(11):
+        for kk in range(2):
+            col = param_col(b, kk)
+            if col >= 0:
+                for c in range(3):
+                    Jv[3 * b + c, col] = T[b, kk, c]
+    M = np.dot(RA.T, R)
+    for c in range(3):
+        Jv[33 + c, 0] = M[c, 2]
+        Jv[33 + c, 2] = -M[c, 0]
+        Jv[36 + c, 0] = -M[c, 1]
+        Jv[36 + c, 1] = M[c, 0]
+    Jm[:39] = np.dot(W, Jv)
+    k = 39
+    for i in range(8):
+        if seen[i]:
+            for c in range(3):
+                Jm[k] = Jq[MARKER_JOINTS[i], c] / sigma_m
+                k += 1
+    if smooth:
+        for j in range(13):
+            for c in range(3):
+                Jm[k] = Jq[j, c] / sigma_s
+                k += 1
+
+
+@njit(cache=True)
+def _expm(w):
+    th = math.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
+    E = np.eye(3)
+    if th < 1e-12:
+        return E
+    k = w / th
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return E + math.sin(th) * K + (1.0 - math.cos(th)) * np.dot(K, K)
+
+
+@njit(cache=True)
+def _step(R, o, dirs, delta, T):
+    R2 = np.dot(R, _expm(delta[:3]))
+    o2 = o + delta[3:6]
+    d2 = dirs.copy()
+    for b in range(11):
+        for kk in range(2):
+            col = param_col(b, kk)
+            if col >= 0:
+                d2[b] += delta[col] * T[b, kk]
+        d2[b] = _normalize(d2[b])
+    return R2, o2, d2
+
+
+@njit(cache=True)
+def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, Gm, max_iter, tol):
+    """Levenberg-Marquardt from (R, o, dirs). Returns (R, o, dirs, q (13, 3), iterations, cost)."""
+    n_seen = 0
+    for i in range(8):
+        if seen[i]:
+            n_seen += 1
+    n_res = 39 + 3 * n_seen + (39 if smooth else 0)
+    r = np.empty(n_res)
+    r_new = np.empty(n_res)
+    q = np.empty((13, 3))
+    q_new = np.empty((13, 3))
+    Jm = np.empty((n_res, 27))
+    cost = _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
+    lam = 1e-3
+    it = 0
+    while it < max_iter:
+        it += 1
+        T = _tangents(dirs)
+        _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm)
+        A = np.dot(Jm.T, Jm)
+        g = np.dot(Jm.T, r)
+        accepted = False
+        while lam <= 1e9:
+            Ad = A.copy()
+            for i in range(27):
+                Ad[i, i] += lam * (A[i, i] + 1e-9)
+            delta = -np.linalg.solve(Ad, g)
+            R2, o2, d2 = _step(R, o, dirs, delta, T)
+            cost_new = _residuals(R2, o2, d2, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q_new, r_new)
+            if cost_new <= cost:
+                accepted = True
+                break
+            lam *= 10.0
+        if not accepted:
+            break
+        R, o, dirs = R2, o2, d2
+        r[:] = r_new
+        q[:] = q_new
+        lam = max(lam * 0.2, 1e-9)
+        done = cost - cost_new <= tol * (1.0 + cost)
+        cost = cost_new
+        if done:
+            break
+    return R, o, dirs, q, it, cost
+
+
+@njit(cache=True)
+def energy(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s):
+    """The energy of one state (for choosing between starts)."""
+    n_seen = 0
+    for i in range(8):
+        if seen[i]:
+            n_seen += 1
+    r = np.empty(39 + 3 * n_seen + (39 if smooth else 0))
+    q = np.empty((13, 3))
+    return _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
+
+
+@njit(cache=True)
+def solve_frame(db_dirs, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, R_nn, RA, origin,
+                obs, seen, sigma_m, smooth, target, sigma_s, has_prev, R0, o0, d0, Gm, max_iter, tol):
+    """One frame after the neighbour search, in one compiled call.
+
+    nbrs: (P, K) neighbour indices per body part; dims: (P, 39) pose-vector entries of each part
+    (first n_dims[p] valid); the last part is the trunk (or the whole body when P == 1), parts 0
+    and 1 the left and right arm. R_nn: (3, 3) marker axes in torso coordinates of the trunk's
+    nearest pose; RA, origin: the observation's marker frame (world); obs (8, 3), seen (8,):
+    observed markers; smooth/target/sigma_s: temporal term; has_prev/R0/o0/d0: the previous
+    pose as a second start. Returns (R, o, dirs, q (13, 3), iterations).
+    """
+    P, K = nbrs.shape
+    N = cos_a.shape[0]
+    n_pool = K * (N + 1)
+    mu = np.zeros(39)
+    W = np.zeros((39, 39))
+    pools = np.empty((P, n_pool, 11, 3))
+    X = np.empty((n_pool, 39))
+    for part in range(P):
+        arm = P == 3 and part < 2
+        if arm:
+            pseudo_pool(db_dirs, nbrs[part], cos_a, sin_a, pools[part], False, part, part + 1)
+        elif P == 3:
+            pseudo_pool(db_dirs, nbrs[part], cos_a, sin_a, pools[part], True, 2, 4)
+        else:
+            pseudo_pool(db_dirs, nbrs[part], cos_a, sin_a, pools[part], True, 0, 4)
+        pose_vectors(pools[part], lengths, X, not arm)
+        gaussian_block(X, dims[part, :n_dims[part]], floor2, weight, mu, W)
+    pool = pools[P - 1].copy()
+    if P == 3:  # the arms of the start come from their own pools
+        for p in range(n_pool):
+            for b in (LUA, LFA):
+                pool[p, b] = pools[0, p, b]
+            for b in (RUA, RFA):
+                pool[p, b] = pools[1, p, b]
+    # observation in the torso coordinates of the nearest pose: ((x - origin) @ RA) @ R_nn.T
+    obs_torso = np.zeros((8, 3))
+    for i in range(8):
+        if seen[i]:
+            a = np.dot(obs[i] - origin, RA)
+            obs_torso[i] = np.dot(R_nn, a)
+    Rs = np.dot(RA, R_nn.T)
+    ds = linear_start(pool, lengths, obs_torso, seen)
+    os_ = origin.copy()
+    if has_prev:
+        e_lin = energy(Rs, os_, ds, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s)
+        e_prev = energy(R0, o0, d0, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s)
+        if e_prev < e_lin:
+            Rs, os_, ds = R0.copy(), o0.copy(), d0.copy()
+    R, o, d, q, it, _cost = lm_solve(Rs, os_, ds, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
+                                     sigma_s, Gm, max_iter, tol)
+    return R, o, d, q, it
