@@ -49,7 +49,10 @@ def aligned(est: CameraRig, true: CameraRig) -> CameraRig:
 
 
 def bench_triangulation() -> list[str]:
-    out = ["| cameras | us / frame (8 markers) | mean 3D error (mm) |", "|---|---|---|"]
+    import os
+
+    out = [f"(load average at start {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores: other work on the box slows this)", "",
+           "| cameras | us / frame (8 markers), best of 5 | mean 3D error (mm) |", "|---|---|---|"]
     rng = np.random.default_rng(0)
     for n in (2, 4):
         rig = default_rig(n)

@@ -50,6 +50,7 @@ class DetectConfig:
     static_frames: int = 600  #: frames a blob must stay still to become a distractor
     static_radius: float = 0.35  #: px
     static_forget: int = 30  #: frames a distractor may be absent before it is forgotten
+    static_every: int = 4  #: learn the static mask every this many frames (the mask applies to all)
 
     def __post_init__(self) -> None:
         if self.threshold_mode not in ("auto", "fixed"):
@@ -63,13 +64,12 @@ class DetectConfig:
 @dataclass
 class Detections:
     """Blobs of one frame. uv: (N, 2) float32 px; area: (N,) int32 px above threshold;
-    size: (N, 2) int32 bounding box (w, h); peak: (N,) uint8 max grey level; cov: (N, 3)
-    float32 intensity-weighted second central moments (var_u, cov_uv, var_v) in px^2."""
+    size: (N, 2) int32 bounding box (w, h); cov: (N, 3) float32 intensity-weighted second
+    central moments (var_u, cov_uv, var_v) in px^2."""
 
     uv: np.ndarray
     area: np.ndarray
     size: np.ndarray
-    peak: np.ndarray
     threshold: int
     cov: np.ndarray | None = None
 
@@ -79,7 +79,7 @@ class Detections:
     @classmethod
     def empty(cls, threshold: int) -> "Detections":
         return cls(np.zeros((0, 2), np.float32), np.zeros(0, np.int32), np.zeros((0, 2), np.int32),
-                   np.zeros(0, np.uint8), threshold, np.zeros((0, 3), np.float32))
+                   threshold, np.zeros((0, 3), np.float32))
 
 
 class StaticMask:
@@ -96,40 +96,46 @@ class StaticMask:
         """(K, 2) positions currently masked."""
         return self.pos[self.count >= self.frames]
 
+    def apply(self, uv: np.ndarray) -> np.ndarray:
+        """(N,) bool keep-mask for blobs uv (N, 2) against the learnt distractors only."""
+        st = self.static
+        if not len(st) or not len(uv):
+            return np.ones(len(uv), bool)
+        d2 = ((uv[:, None, :] - st[None, :, :]) ** 2).sum(-1)
+        return d2.min(axis=1) > self.radius ** 2
+
     def update(self, uv: np.ndarray) -> np.ndarray:
-        """Feed this frame's blobs (N, 2); returns a (N,) bool keep-mask (False = distractor)."""
+        """Learn from this frame's blobs (N, 2); returns a (N,) bool keep-mask (False = distractor)."""
         n = len(uv)
         keep = np.ones(n, bool)
         matched = np.zeros(len(self.pos), bool)
+        new = np.ones(n, bool)
         if len(self.pos) and n:
             d2 = ((uv[:, None, :] - self.pos[None, :, :]) ** 2).sum(-1)
             j = d2.argmin(1)
             close = d2[np.arange(n), j] <= self.radius ** 2
-            for i in np.flatnonzero(close):
-                k = j[i]
-                if matched[k]:
-                    continue
-                matched[k] = True
-                if self.count[k] >= self.frames:
-                    keep[i] = False
-                else:
-                    c = self.count[k]
-                    self.pos[k] = (self.pos[k] * min(c, 50) + uv[i]) / (min(c, 50) + 1)
-                self.count[k] += 1
+            idx = np.flatnonzero(close)
+            k = j[idx]
+            matched[k] = True
+            learnt = self.count[k] >= self.frames
+            keep[idx[learnt]] = False
+            ku, iu = k[~learnt], idx[~learnt]
+            c = np.minimum(self.count[ku], 50)[:, None]
+            self.pos[ku] = (self.pos[ku] * c + uv[iu]) / (c + 1)
+            self.count[k] += 1
             new = ~close
-        else:
-            new = np.ones(n, bool)
         self.absent[matched] = 0
         self.absent[~matched] += 1
         # a still-learning candidate that was missed or moved starts over; a learnt one is
-        # forgotten only after `forget` absent frames
-        learnt = self.count >= self.frames
-        alive = np.where(learnt, self.absent <= self.forget, matched)
-        self.pos, self.count, self.absent = self.pos[alive], self.count[alive], self.absent[alive]
+        # forgotten only after `forget` absent updates
+        alive = np.where(self.count >= self.frames, self.absent <= self.forget, matched)
+        if not alive.all():
+            self.pos, self.count, self.absent = self.pos[alive], self.count[alive], self.absent[alive]
         if new.any():
+            m = int(new.sum())
             self.pos = np.vstack([self.pos, uv[new]])
-            self.count = np.concatenate([self.count, np.ones(int(new.sum()), np.int64)])
-            self.absent = np.concatenate([self.absent, np.zeros(int(new.sum()), np.int64)])
+            self.count = np.concatenate([self.count, np.ones(m, np.int64)])
+            self.absent = np.concatenate([self.absent, np.zeros(m, np.int64)])
         if len(self.pos) > 256:  # bound memory under heavy noise
             order = np.argsort(-self.count)[:256]
             self.pos, self.count, self.absent = self.pos[order], self.count[order], self.absent[order]
@@ -145,7 +151,9 @@ class Detector:
         self.background = 0.0
         self.noise = 2.0
         self._frame_no = 0
-        self.mask = StaticMask(self.cfg.static_frames, self.cfg.static_radius, self.cfg.static_forget)
+        every = max(self.cfg.static_every, 1)
+        self.mask = StaticMask(max(self.cfg.static_frames // every, 1), self.cfg.static_radius,
+                               max(self.cfg.static_forget // every, 1))
         self.masked = 0  #: blobs dropped by the static mask, total
 
     def _update_threshold(self, img: np.ndarray) -> None:
@@ -178,47 +186,39 @@ class Detector:
         h, w = img.shape
         floor = int(min(self.background + cfg.floor_sigmas * self.noise, thr - 1))
         pad = cfg.pad
-        boxes = []
+        min_area, max_area, max_aspect, min_fill = cfg.min_area, cfg.max_area, cfg.max_aspect, cfg.min_fill
+        labels = None
+        kernel = None
+        rows = []
         for c in contours:
             x, y, bw, bh = cv2.boundingRect(c)
-            if bw * bh < cfg.min_area or max(bw, bh) > cfg.max_aspect * min(bw, bh) + 1:
+            if bw * bh < min_area or (bw > max_aspect * bh + 1 or bh > max_aspect * bw + 1):
                 continue
-            boxes.append((x, y, bw, bh, int(c[0, 0, 0]), int(c[0, 0, 1])))
-        if not boxes:
-            return Detections.empty(thr)
-        bx = np.asarray(boxes)
-        # padded ROIs that reach into another blob's box need per-pixel ownership
-        x0s, y0s = bx[:, 0] - pad, bx[:, 1] - pad
-        x1s, y1s = bx[:, 0] + bx[:, 2] + pad, bx[:, 1] + bx[:, 3] + pad
-        crowded = np.zeros(len(bx), bool)
-        if len(bx) > 1:
-            ov = ((x0s[:, None] < bx[None, :, 0] + bx[None, :, 2]) & (bx[None, :, 0] < x1s[:, None])
-                  & (y0s[:, None] < bx[None, :, 1] + bx[None, :, 3]) & (bx[None, :, 1] < y1s[:, None]))
-            np.fill_diagonal(ov, False)
-            crowded = ov.any(axis=1)
-        labels = cv2.connectedComponents(binary, connectivity=8)[1] if crowded.any() else None
-        kernel = np.ones((2 * pad + 1, 2 * pad + 1), np.uint8)
-        rows = []
-        for (x, y, bw, bh, px, py), crowd in zip(boxes, crowded):
-            x0, y0 = max(x - pad, 0), max(y - pad, 0)
+            x0, y0 = x - pad if x > pad else 0, y - pad if y > pad else 0
             x1, y1 = min(x + bw + pad, w), min(y + bh + pad, h)
+            area = cv2.countNonZero(binary[y:y + bh, x:x + bw])
+            if area > max_area or area < min_area:
+                continue
             roi = img[y0:y1, x0:x1]
             weights = cv2.subtract(roi, floor)
-            if crowd and labels is not None:
+            if cv2.countNonZero(binary[y0:y1, x0:x1]) != area:
+                # another blob reaches into the padded ROI: weight only this blob's pixels
+                # and the background around them
+                if labels is None:
+                    labels = cv2.connectedComponents(binary, connectivity=8)[1]
+                    kernel = np.ones((2 * pad + 1, 2 * pad + 1), np.uint8)
                 lab = labels[y0:y1, x0:x1]
-                own = (lab == labels[py, px]).astype(np.uint8)
+                own = (lab == labels[c[0, 0, 1], c[0, 0, 0]]).astype(np.uint8)
                 area = int(own.sum())
                 near = cv2.dilate(own, kernel) & ((lab == 0) | (own > 0)).astype(np.uint8)
                 weights = weights * near
-            else:
-                area = cv2.countNonZero(binary[y:y + bh, x:x + bw])
-            if area < cfg.min_area or area > cfg.max_area or area < cfg.min_fill * bw * bh:
+            if area < min_area or area < min_fill * bw * bh:
                 continue
             m = cv2.moments(weights)
-            if m["m00"] <= 0:
-                continue
             m00 = m["m00"]
-            rows.append((x0 + m["m10"] / m00, y0 + m["m01"] / m00, area, bw, bh, int(roi.max()),
+            if m00 <= 0:
+                continue
+            rows.append((x0 + m["m10"] / m00, y0 + m["m01"] / m00, area, bw, bh,
                          m["mu20"] / m00, m["mu11"] / m00, m["mu02"] / m00))
         if not rows:
             return Detections.empty(thr)
@@ -226,8 +226,12 @@ class Detector:
         if len(a) > cfg.max_blobs:
             a = a[np.argsort(-a[:, 2])[: cfg.max_blobs]]
         if cfg.static_mask:
-            keep = self.mask.update(a[:, :2])
+            # learn every `static_every` frames (counts are in learning steps), mask every frame
+            if self._frame_no % cfg.static_every == 0:
+                keep = self.mask.update(a[:, :2])
+            else:
+                keep = self.mask.apply(a[:, :2])
             self.masked += int((~keep).sum())
             a = a[keep]
         return Detections(a[:, :2].astype(np.float32), a[:, 2].astype(np.int32), a[:, 3:5].astype(np.int32),
-                          a[:, 5].astype(np.uint8), thr, a[:, 6:9].astype(np.float32))
+                          thr, a[:, 5:8].astype(np.float32))

@@ -62,7 +62,7 @@ class TrackConfig:
     coast_decay: float = 0.85  #: velocity decay per frame while coasting
     stale_penalty: float = 0.3  #: assignment cost (px) per frame since a track's last clean measurement
     split_min_px: float = 1.5  #: a merged pair is split along its long axis when this far apart (px)
-    recheck_every: int = 10  #: look for a T-pose every this many frames and re-label if it disagrees
+    recheck_every: int = 15  #: look for a T-pose every this many frames (exactly 8 blobs) and re-label if it disagrees
     split_margin: float = 1.0  #: px; a split decided by less than this makes both labels uncertain
     doubt_after_gap: int = 2  #: a track back after more missing frames than this, near another, is uncertain
     recover_frames: int = 6  #: frames one plausible labelling of uncertain markers must hold
@@ -173,9 +173,17 @@ def _min_cost_assignment(D: np.ndarray, gate: np.ndarray, C: np.ndarray | None =
         D = C
     pairs: list[tuple[int, int]] = []
     T, N = D.shape
-    seen_t = np.zeros(T, bool)
+    # fast path: a track with a single gated blob that no other track can reach
+    row = ok.sum(axis=1)
+    col = ok.sum(axis=0)
+    single = ok & (row[:, None] == 1) & (col[None, :] == 1)
+    ts, bs = np.nonzero(single)
+    pairs += list(zip(ts.tolist(), bs.tolist()))
+    seen_t = single.any(axis=1) | (row == 0)
+    if seen_t.all():
+        return pairs
     for t0 in range(T):
-        if seen_t[t0] or not ok[t0].any():
+        if seen_t[t0]:
             continue
         # grow the connected component
         ts, bs = {t0}, set()
@@ -306,7 +314,8 @@ class MarkerTracker:
             return self._unlabelled(uv, area)
         cfg = self.cfg
         n_lost = int((self.missing > cfg.coast_frames).sum())
-        recheck = self.initialised and cfg.recheck_every > 0 and self._frame % cfg.recheck_every == 0
+        recheck = (self.initialised and cfg.recheck_every > 0 and self._frame % cfg.recheck_every == 0
+                   and len(uv) == N_MARKERS)
         if not self.initialised or n_lost >= cfg.reinit_lost or recheck:
             was = self.initialised
             if self._try_init(uv, area, relabel_only=recheck and n_lost < cfg.reinit_lost):
@@ -334,9 +343,9 @@ class MarkerTracker:
         blob_r = np.sqrt(np.maximum(area, 1.0) / np.pi)
         owner = {b: m for m, b in assigned.items()}
         merged: set[int] = set()
-        for m in np.flatnonzero(active):
-            m = int(m)
-            if m in assigned or not n or not np.isfinite(pred[m]).all():
+        finite = np.isfinite(pred).all(axis=1)
+        for m in range(N_MARKERS):
+            if m in assigned or not n or not active[m] or not finite[m]:
                 continue
             for b in np.argsort(D[m])[:3]:
                 b = int(b)
@@ -352,13 +361,17 @@ class MarkerTracker:
                     break
         # a blob much larger than its track's single-marker area holds another marker we do not
         # track right now (lost or never seen): its centroid is biased and its split unsure
-        for m, b in list(assigned.items()):
-            if m not in merged and self.area[m] > 0 and area[b] >= cfg.merge_area_ratio * self.area[m] + 2.0:
-                merged.add(m)
-                self.partners[m].add(-1)
-                self.unresolved[m] = True
+        if assigned:
+            ms = np.fromiter(assigned.keys(), int, len(assigned))
+            bs = np.fromiter(assigned.values(), int, len(assigned))
+            big = (self.area[ms] > 0) & (area[bs] >= cfg.merge_area_ratio * self.area[ms] + 2.0)
+            for m in ms[big].tolist():
+                if m not in merged:
+                    merged.add(m)
+                    self.partners[m].add(-1)
+                    self.unresolved[m] = True
         # stage 2: lost tracks re-acquire blobs nobody claimed, nearest first
-        if n:
+        if n and not active.all():
             taken = set(assigned.values())
             cands = sorted((D[m, b], int(m), b) for m in np.flatnonzero(~active) for b in range(n)
                            if b not in taken and D[m, b] < gate[m])
@@ -402,37 +415,31 @@ class MarkerTracker:
                     norm = float(np.linalg.norm(off))
                     sub[m] = uv[b] + (off * (blob_r[b] / norm) if norm > blob_r[b] else off)
         self._update_certainty(pred, uv, assigned, merged, groups, gate)
-        # state update
-        for m in range(N_MARKERS):
-            if m in assigned:
-                b = assigned[m]
-                z = sub.get(m, uv[b])
-                if self.missing[m] > 0 or not np.isfinite(pred[m]).all():
-                    self.vel[m] = 0.0
-                    self.pos[m] = z
-                else:
-                    innov = z - pred[m]
-                    gain = cfg.beta if m not in merged else 0.5 * cfg.beta
-                    self.pos[m] = pred[m] + cfg.alpha * innov
-                    self.vel[m] = self.vel[m] + gain * innov / dt
-                self.missing[m] = 0
-                if m in merged:
-                    self.stale[m] += 1
-                else:
-                    self.stale[m] = 0
-                    if self.area[m] <= 0:
-                        self.area[m] = area[b]
-                    else:  # learn the single-marker area; adapt only slowly to larger blobs
-                        rate = 0.2 if area[b] < 1.3 * self.area[m] else 0.01
-                        self.area[m] += rate * (area[b] - self.area[m])
-            else:
-                self.missing[m] += 1
-                self.stale[m] += 1
-                if self.missing[m] <= cfg.coast_frames and np.isfinite(pred[m]).all():
-                    self.pos[m] = pred[m]
-                    self.vel[m] *= cfg.coast_decay
-                else:
-                    self.vel[m] = 0.0
+        # state update, vectorised over the tracks
+        has = np.zeros(N_MARKERS, bool)
+        blob = np.zeros(N_MARKERS, int)
+        for m, b in assigned.items():
+            has[m], blob[m] = True, b
+        mrg = np.zeros(N_MARKERS, bool)
+        mrg[list(merged)] = True
+        z = uv[blob] if n else np.zeros((N_MARKERS, 2))
+        for m, zm in sub.items():
+            z[m] = zm
+        restart = has & ((self.missing > 0) | ~finite)
+        smooth = has & ~restart
+        innov = z - pred
+        gain = np.where(mrg, 0.5 * cfg.beta, cfg.beta)[:, None]
+        self.pos = np.where(restart[:, None], z, np.where(smooth[:, None], pred + cfg.alpha * innov, self.pos))
+        self.vel = np.where(restart[:, None], 0.0, np.where(smooth[:, None], self.vel + gain * innov / dt, self.vel))
+        clean = has & ~mrg
+        self.stale = np.where(clean, 0, self.stale + 1)
+        a_blob = area[blob] if n else np.zeros(N_MARKERS)
+        rate = np.where(a_blob < 1.3 * self.area, 0.2, 0.01)
+        self.area = np.where(clean, np.where(self.area <= 0, a_blob, self.area + rate * (a_blob - self.area)), self.area)
+        self.missing = np.where(has, 0, self.missing + 1)
+        coast = ~has & (self.missing <= cfg.coast_frames) & finite
+        self.pos = np.where(coast[:, None], pred, self.pos)
+        self.vel = np.where(coast[:, None], self.vel * cfg.coast_decay, np.where((~has & ~coast)[:, None], 0.0, self.vel))
         return self._output(uv, area, assigned, merged, n)
 
     def _doubt(self, m: int) -> None:

@@ -78,10 +78,13 @@ class KDTree:
         return KDTree(data, perm, as_i(start), as_i(end), as_i(dim), np.asarray(val, np.float64), as_i(left),
                       as_i(right), box_lo, box_hi)
 
+    def arrays(self) -> tuple:
+        """The tree as a tuple of arrays, the argument form of :func:`knn`."""
+        return (self.data, self.perm, self.start, self.end, self.dim, self.val, self.left, self.right, self.lo, self.hi)
+
     def query(self, q: np.ndarray, k: int) -> np.ndarray:
         """Indices (min(k, N),) of the nearest points to q (D,), nearest first."""
-        return knn(self.data, self.perm, self.start, self.end, self.dim, self.val, self.left, self.right,
-                   self.lo, self.hi, np.ascontiguousarray(q, dtype=np.float64), min(k, len(self.data)))
+        return knn(*self.arrays(), np.ascontiguousarray(q, dtype=np.float64), min(k, len(self.data)))
 
 
 @njit(cache=True)

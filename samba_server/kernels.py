@@ -23,6 +23,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .kdtree import knn
+
 N_BONES = 11
 N_PARAMS = 27
 N_POSE = 39
@@ -585,3 +587,105 @@ def solve_frame(db_dirs, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weig
     R, o, d, q, it, _cost = lm_solve(Rs, os_, ds, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
                                      sigma_s, Gm, max_iter, tol)
     return R, o, d, q, it
+
+
+@njit(cache=True)
+def _partial_knn(features, cols, n_cols, feature, k):
+    """Nearest poses on the finite entries of ``feature`` among columns cols[:n_cols] (brute force;
+    used only when a marker is unseen and there is no prediction to fill it)."""
+    N = features.shape[0]
+    d = np.zeros(N)
+    used = 0
+    for i in range(n_cols):
+        c = cols[i]
+        if np.isfinite(feature[c]):
+            used += 1
+            for p in range(N):
+                diff = features[p, c] - feature[c]
+                d[p] += diff * diff
+    if used == 0:  # nothing of this part seen: use every seen coordinate
+        for c in range(feature.shape[0]):
+            if np.isfinite(feature[c]):
+                for p in range(N):
+                    diff = features[p, c] - feature[c]
+                    d[p] += diff * diff
+    return np.argsort(d)[:k]
+
+
+@njit(cache=True)
+def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, features, feat_cols, n_cols,
+          R_A_db, db_dirs, k, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, sigma_m, accel, min_markers,
+          Gm, max_iter, tol):
+    """The whole per-frame solve in one compiled call.
+
+    markers: (8, 3) world metres, NaN rows unseen. History: n_hist (0-2) previous poses q1 (last),
+    q2 (13, 3); has_pred: whether they are recent enough to predict from; has_state/R0/o0/d0: the
+    last solved state; dt: seconds since the last pose. trees: per body part, the KD-tree arrays
+    (see :mod:`samba_server.kdtree`) over ``features`` (M, 24) columns feat_cols[p, :n_cols[p]].
+    Returns (status, q (13, 3), R, o, dirs, iterations, rms marker residual, markers seen) with
+    status 0 = solved, 1 = bridged (too few markers, temporal model), 2 = unsolved.
+    """
+    q = np.full((13, 3), np.nan)
+    seen = np.zeros(8, dtype=np.bool_)
+    n_seen = 0
+    for i in range(8):
+        seen[i] = np.isfinite(markers[i, 0]) and np.isfinite(markers[i, 1]) and np.isfinite(markers[i, 2])
+        if seen[i]:
+            n_seen += 1
+    bridged = n_seen < min_markers
+    if bridged and not has_pred:
+        return 2, q, R0, o0, d0, 0, np.nan, n_seen
+    filled = markers.copy()
+    obs = np.zeros((8, 3))
+    for i in range(8):
+        if seen[i]:
+            obs[i] = markers[i]
+        elif has_pred:
+            j = MARKER_JOINTS[i]
+            for c in range(3):
+                filled[i, c] = q1[j, c] if n_hist == 1 else 2.0 * q1[j, c] - q2[j, c]
+    for c in range(3):
+        if not (np.isfinite(filled[0, c]) and np.isfinite(filled[1, c])):
+            return 2, q, R0, o0, d0, 0, np.nan, n_seen
+    if filled[0, 0] == filled[1, 0] and filled[0, 1] == filled[1, 1] and filled[0, 2] == filled[1, 2]:
+        return 2, q, R0, o0, d0, 0, np.nan, n_seen
+    RA = marker_axes(filled)
+    origin = 0.5 * (filled[0] + filled[1])
+    feature = np.empty(24)
+    for i in range(8):
+        for c in range(3):
+            feature[3 * i + c] = ((filled[i, 0] - origin[0]) * RA[0, c] + (filled[i, 1] - origin[1]) * RA[1, c]
+                                  + (filled[i, 2] - origin[2]) * RA[2, c])
+    P = len(trees)
+    nbrs = np.empty((P, k), dtype=np.int64)
+    for part in range(P):
+        cols = feat_cols[part, :n_cols[part]]
+        sub = np.empty(cols.shape[0])
+        ok = True
+        for i in range(cols.shape[0]):
+            sub[i] = feature[cols[i]]
+            ok = ok and np.isfinite(sub[i])
+        if ok:
+            tr = trees[part]
+            nbrs[part] = knn(tr[0], tr[1], tr[2], tr[3], tr[4], tr[5], tr[6], tr[7], tr[8], tr[9], sub, k)
+        else:
+            nbrs[part] = _partial_knn(features, feat_cols[part], n_cols[part], feature, k)
+    smooth = n_hist == 2 and dt > 0
+    target = np.zeros((13, 3))
+    if smooth:
+        target = 2.0 * q1 - q2
+    o_start = o0.copy()
+    if has_state and n_hist == 2:  # the shoulder midpoint moves on at constant velocity
+        o_start += 0.5 * (q1[LS] + q1[RS] - q2[LS] - q2[RS])
+    sigma_s = max(accel * dt * dt, 1e-3)
+    R, o, d, q, it = solve_frame(db_dirs, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weight,
+                                 R_A_db[nbrs[P - 1, 0]], RA, origin, obs, seen, sigma_m, smooth, target, sigma_s,
+                                 has_state and has_pred, R0, o_start, d0, Gm, max_iter, tol)
+    acc = 0.0
+    for i in range(8):
+        if seen[i]:
+            for c in range(3):
+                e = q[MARKER_JOINTS[i], c] - markers[i, c]
+                acc += e * e
+    resid = math.sqrt(acc / n_seen) if n_seen else np.nan
+    return (1 if bridged else 0), q, R, o, d, it, resid, n_seen

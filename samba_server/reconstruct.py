@@ -25,7 +25,6 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from samba_common.align import batch_frames
 from samba_common.body import D, fk_body
@@ -34,6 +33,7 @@ from samba_common.skeleton import BONE_TYPES, MARKER_JOINT, N_JOINTS, N_MARKERS
 from .db import MotionDB, load_default_db
 from .proportions import ProportionError, estimate_lengths
 from . import kernels
+from .kdtree import KDTree
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +45,8 @@ class ReconstructConfig:
     k: neighbours; pseudo: pseudo-poses per neighbour; ball_sigma_deg / hinge_sigma_deg: joint
     angle noise of pseudo-poses; prior_floor_deg: smallest standard deviation of a direction
     component in the prior; prior_weight: multiplies the prior energy; sigma_marker: marker
-    noise (m); accel: typical joint acceleration (m/s^2) for the smoothness term; min_markers:
+    noise (m); accel: typical joint acceleration (m/s^2) for the smoothness term; max_iter, tol: LM
+    iteration cap and relative energy decrease that stops it; min_markers:
     fewer observed markers make a frame "bridged" by the temporal model; max_gap: longest bridge
     (s), beyond it frames are NaN; max_iter: LM iteration cap; body_frames: frames used to
     estimate the body live; seed: pseudo-pose noise bank seed.
@@ -61,7 +62,8 @@ class ReconstructConfig:
     accel: float = 80.0
     min_markers: int = 4
     max_gap: float = 0.3
-    max_iter: int = 15
+    max_iter: int = 10
+    tol: float = 1e-3
     body_frames: int = 30
     seed: int = 7
     parts: bool = True
@@ -85,7 +87,6 @@ class PoseResult:
 PART_FEATURES = (np.r_[6:9], np.r_[9:12], np.r_[12:24])
 PART_DIMS = (np.r_[9:12, 15:18], np.r_[12:15, 18:21], np.r_[0:9, 21:39])
 WHOLE = (np.r_[0:24], np.r_[0:39])
-_MARKERS = np.array(MARKER_JOINT)
 
 
 class PoseIndex:
@@ -102,22 +103,7 @@ class PoseIndex:
         origin, R_A = batch_frames(markers)
         self.features = np.einsum("fpi,fij->fpj", markers - origin[:, None], R_A).reshape(len(db), -1)
         self.R_A = np.ascontiguousarray(R_A)
-        self.trees = {cols.tobytes(): cKDTree(self.features[:, cols]) for cols in (WHOLE[0], *PART_FEATURES)}
-
-    def query(self, feature: np.ndarray, cols: np.ndarray, k: int) -> np.ndarray:
-        """Indices (k,) of the poses nearest to ``feature`` (24,) on columns ``cols``.
-
-        NaN entries (unseen markers with no prediction) are left out of the distance."""
-        f = feature[cols]
-        ok = np.isfinite(f)
-        if ok.all():
-            _d, idx = self.trees[cols.tobytes()].query(f, k=k)
-            return np.atleast_1d(idx).astype(np.int64)
-        if not ok.any():  # nothing of this part seen: fall back to the whole body
-            cols, ok = WHOLE[0], np.isfinite(feature)
-            f = feature
-        d = np.sum((self.features[:, cols[ok]] - f[ok]) ** 2, axis=1)
-        return (np.argpartition(d, k)[:k] if k < len(d) else np.arange(len(d))).astype(np.int64)
+        self.trees = {cols.tobytes(): KDTree.build(self.features[:, cols]) for cols in (WHOLE[0], *PART_FEATURES)}
 
 
 def _padded(dims: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -130,8 +116,15 @@ def _padded(dims: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass
 class _History:
-    joints: list[np.ndarray] = field(default_factory=list)  # last two solved world poses
-    state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # R, o, dirs of the last pose
+    """The temporal state: the last two solved poses and the last solved state."""
+
+    n: int = 0                                   # poses in q1/q2 (0-2)
+    q1: np.ndarray = field(default_factory=lambda: np.zeros((N_JOINTS, 3)))  # last pose
+    q2: np.ndarray = field(default_factory=lambda: np.zeros((N_JOINTS, 3)))  # the one before
+    has_state: bool = False
+    R: np.ndarray = field(default_factory=lambda: np.eye(3))
+    o: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    dirs: np.ndarray = field(default_factory=lambda: np.zeros((11, 3)))
     t_last: float = -np.inf   # time of the last solved or bridged frame
     t_seen: float = -np.inf   # time of the last frame with enough markers
 
@@ -155,6 +148,7 @@ class Reconstructor:
         self._cos, self._sin = np.cos(angles), np.sin(angles)
         self._floor2 = float(np.radians(cfg.prior_floor_deg) ** 2)
         self._dims = {flag: _padded(PART_DIMS if flag else (WHOLE[1],)) for flag in (False, True)}
+        self._cols = {flag: _padded(PART_FEATURES if flag else WHOLE[:1]) for flag in (False, True)}
         self._estimating = lengths is None
         self._body_buffer: list[np.ndarray] = []
         self.lengths: np.ndarray | None = None
@@ -197,56 +191,29 @@ class Reconstructor:
     def _unsolved(self, n: int) -> PoseResult:
         return PoseResult(np.full((N_JOINTS, 3), np.nan), float("nan"), n, 0, "unsolved")
 
-    def _prediction(self, t: float) -> np.ndarray | None:
-        h = self._hist
-        if not h.joints or t - h.t_seen > self.config.max_gap:
-            return None
-        if len(h.joints) == 1:
-            return h.joints[-1]
-        return 2.0 * h.joints[-1] - h.joints[-2]
-
     def _solve(self, markers: np.ndarray, t: float) -> PoseResult:
-        cfg = self.config
+        cfg, h = self.config, self._hist
         assert self.lengths is not None and self.index is not None
-        seen = np.all(np.isfinite(markers), axis=1)
-        n_seen = int(seen.sum())
-        pred = self._prediction(t)
-        if pred is None and self._hist.joints:
+        has_pred = h.n > 0 and t - h.t_seen <= cfg.max_gap
+        if not has_pred and h.n:
             self.reset()
-        bridged = n_seen < cfg.min_markers
-        if bridged and pred is None:
-            return self._unsolved(n_seen)
-        filled = markers.copy()
-        if pred is not None:
-            filled[~seen] = pred[_MARKERS][~seen]
-        if not (np.isfinite(filled[:2]).all() and np.any(filled[0] != filled[1])):
-            return self._unsolved(n_seen)  # no shoulders, no body frame
-        RA = kernels.marker_axes(filled)
-        origin = 0.5 * (filled[0] + filled[1])
-        feature = ((filled - origin) @ RA).reshape(-1)
-        k = min(cfg.k, len(self.db))
-        nbrs = np.stack([self.index.query(feature, cols, k) for cols in (PART_FEATURES if cfg.parts else WHOLE[:1])])
-        h = self._hist
-        dt = t - h.t_last if h.joints else 0.0
-        smooth = len(h.joints) == 2 and dt > 0
-        target = 2.0 * h.joints[-1] - h.joints[-2] if smooth else np.zeros((N_JOINTS, 3))
-        has_prev = h.state is not None and pred is not None
-        R0, o0, d0 = h.state if has_prev else (np.eye(3), np.zeros(3), np.zeros((11, 3)))
-        if has_prev and len(h.joints) == 2:  # shoulder midpoint moves on at constant velocity
-            o0 = o0 + 0.5 * (h.joints[-1][1] + h.joints[-1][2] - h.joints[-2][1] - h.joints[-2][2])
+            h = self._hist
+        parts = PART_FEATURES if cfg.parts else WHOLE[:1]
+        trees = tuple(self.index.trees[c.tobytes()].arrays() for c in parts)
+        feat_cols, n_cols = self._cols[cfg.parts]
         dims, n_dims = self._dims[cfg.parts]
-        R, o, d, q, iters = kernels.solve_frame(
-            self.db.dirs, nbrs, dims, n_dims, self._cos, self._sin, self.lengths, self._floor2, cfg.prior_weight,
-            self.index.R_A[nbrs[-1, 0]], RA, origin, np.where(seen[:, None], markers, 0.0), seen,
-            cfg.sigma_marker, smooth, target, max(cfg.accel * dt * dt, 1e-3), has_prev, R0, o0, d0, kernels.G,
-            cfg.max_iter, 1e-6)
-        err = q[_MARKERS][seen] - markers[seen]
-        resid = float(np.sqrt(np.mean(np.sum(err**2, axis=1)))) if n_seen else float("nan")
-        h.joints = (h.joints + [q])[-2:]
-        h.state, h.t_last = (R, o, d), t
-        if not bridged:
+        status, q, R, o, d, iters, resid, n_seen = kernels.frame(
+            markers, has_pred, h.n, h.q1, h.q2, h.has_state, h.R, h.o, h.dirs, t - h.t_last if h.n else 0.0,
+            trees, self.index.features, feat_cols, n_cols, self.index.R_A, self.db.dirs, min(cfg.k, len(self.db)),
+            dims, n_dims, self._cos, self._sin, self.lengths, self._floor2, cfg.prior_weight, cfg.sigma_marker,
+            cfg.accel, cfg.min_markers, kernels.G, cfg.max_iter, cfg.tol)
+        if status == 2:
+            return PoseResult(q, float("nan"), int(n_seen), 0, "unsolved")
+        h.q2, h.q1, h.n = h.q1, q, min(h.n + 1, 2)
+        h.R, h.o, h.dirs, h.has_state, h.t_last = R, o, d, True, t
+        if status == 0:
             h.t_seen = t
-        return PoseResult(q, resid, n_seen, int(iters), "bridged" if bridged else "solved")
+        return PoseResult(q, float(resid), int(n_seen), int(iters), "solved" if status == 0 else "bridged")
 
 
 def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = None,

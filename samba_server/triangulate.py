@@ -82,8 +82,8 @@ class Triangulator:
         self.rig = rig
         self.config = config or TriangulateConfig()
         cams = rig.cameras
-        if len(cams) < 2:
-            raise ValueError("triangulation needs at least 2 cameras")
+        if not cams:
+            raise ValueError("triangulation needs at least one camera")
         self.C = len(cams)
         self.K = np.stack([c.matrix for c in cams])  # (C,3,3)
         self.dist = np.stack([c.dist[:5] for c in cams])  # (C,5)

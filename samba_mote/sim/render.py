@@ -32,6 +32,7 @@ class SimConfig:
     torso_radius: float = 0.13  #: m, capsule radius of the torso
     tpose_hold: float = 1.0  #: s of T-pose prepended to each take
     tpose_transition: float = 0.6  #: s of blend from the T-pose into the take
+    tpose_stance: float = 0.12  #: m each ankle stands outside its hip in the T-pose (0 = legs straight down)
 
 
 @dataclass

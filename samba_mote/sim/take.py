@@ -88,7 +88,7 @@ def prepare_motion(joints: np.ndarray, t: np.ndarray, cfg: SimConfig, center: bo
         mid = 0.5 * (hips[:, :2].min(0) + hips[:, :2].max(0))
         joints = joints.copy()
         joints[..., :2] -= mid
-    return prepend_tpose(joints, t, cfg.fps, cfg.tpose_hold, cfg.tpose_transition)
+    return prepend_tpose(joints, t, cfg.fps, cfg.tpose_hold, cfg.tpose_transition, cfg.tpose_stance)
 
 
 def write_videos(out_dir: Path, cameras: list[RenderedCamera], fps: float, fourcc: str = "FFV1") -> list[Path]:

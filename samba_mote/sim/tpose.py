@@ -57,7 +57,7 @@ def _rot_z(a: float) -> np.ndarray:
 
 
 def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1.0,
-                  transition: float = 0.6) -> tuple[np.ndarray, np.ndarray, int]:
+                  transition: float = 0.6, stance: float = 0.12) -> tuple[np.ndarray, np.ndarray, int]:
     """Prepend ``hold`` s of T-pose and a ``transition`` s blend into the take.
 
     joints: (F, 13, 3) metres at times t (F,) (uniform at ``fps``). The T-pose uses the
@@ -69,7 +69,7 @@ def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1
     lengths = bone_lengths(first[None])[0]
     hip = 0.5 * (first[J["left_hip"]] + first[J["right_hip"]])
     ankle_z = float(min(first[J["left_ankle"], 2], first[J["right_ankle"], 2]))
-    tp = tpose(lengths, hip[:2], ankle_z)
+    tp = tpose(lengths, hip[:2], ankle_z, stance)
     n_hold = int(round(hold * fps))
     n_tr = int(round(transition * fps))
     yaw = heading(first)

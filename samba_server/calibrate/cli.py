@@ -120,7 +120,7 @@ def cmd_floor(a: argparse.Namespace) -> int:
         from samba_server.calibrate.takeio import read_take
         from samba_server.triangulate import triangulate
 
-        uv = read_take(a.take, rig.names, None)[: max(1, int(round(a.seconds * a.fps)))]
+        uv = read_take(a.take, rig.names, None, rig=rig, fps=a.fps)[: max(1, int(round(a.seconds * a.fps)))]
         F, C, K, _ = uv.shape
         P = triangulate(rig, uv.transpose(1, 0, 2, 3).reshape(C, F * K, 2)).points.reshape(F, K, 3)
         A, b = standard_pose_transform(P, a.ankle_height)
@@ -140,7 +140,8 @@ def cmd_self(a: argparse.Namespace) -> int:
     repair = [n.strip() for n in a.repair.split(",")] if a.repair else None
     if not repair and (a.tibia is None) == (a.height is None):
         raise ValueError("give --tibia or --height for the scale (or --repair CAMS)")
-    uv = read_take(a.take, rig.names, None)
+    has_poses = any(np.any(c.tvec != 0) for c in rig.cameras)
+    uv = read_take(a.take, rig.names, None, rig=rig if has_poses else None, fps=a.fps)
     out, rep = self_calibrate(rig, uv, tibia=a.tibia, height=a.height, repair=repair, fps=a.fps)
     out.save(a.out or a.calib)
     print("\n".join(rep.lines()))

@@ -69,6 +69,43 @@ def _pnp(cam: Camera, pts: np.ndarray, uv: np.ndarray) -> Camera:
     return Camera(cam.name, cam.size, cam.matrix.copy(), cam.dist.copy(), rv.ravel(), tv.ravel())
 
 
+#: marker order with left and right exchanged (MARKER_NAMES come in left/right pairs)
+LR_SWAP = [1, 0, 3, 2, 5, 4, 7, 6]
+
+
+def _epipolar_inliers(a: Camera, b: Camera, ua: np.ndarray, ub: np.ndarray) -> int:
+    """Essential-matrix RANSAC inliers between labelled observations ua, ub (N, 2) raw px."""
+    ok = np.all(np.isfinite(ua), axis=1) & np.all(np.isfinite(ub), axis=1)
+    if ok.sum() < 20:
+        return -1
+    f = 0.5 * (a.matrix[0, 0] + b.matrix[0, 0])
+    E, mask = cv2.findEssentialMat(normalized(a, ua[ok]), normalized(b, ub[ok]), np.eye(3), method=cv2.RANSAC,
+                                   prob=0.999, threshold=1.0 / f)
+    return -1 if E is None else int(mask.sum())
+
+
+def fix_mirrored_cameras(cams: list[Camera], uv: np.ndarray) -> np.ndarray:
+    """Undo a whole-take left/right label swap in a camera (a mote that labelled the T-pose
+    as seen from the wrong side): against the camera with most observations, keep for every
+    other camera the labelling (as is, or left<->right) with more epipolar inliers.
+    uv: (F, C, 8, 2) -> corrected copy."""
+    F, C, K, _ = uv.shape
+    uv = uv.copy()
+    counts = np.isfinite(uv[..., 0]).sum(axis=(0, 2))
+    ref = int(np.argmax(counts))
+    for c in range(C):
+        if c == ref:
+            continue
+        ua = uv[:, ref].reshape(-1, 2)
+        keep = _epipolar_inliers(cams[ref], cams[c], ua, uv[:, c].reshape(-1, 2))
+        swap = _epipolar_inliers(cams[ref], cams[c], ua, uv[:, c][:, LR_SWAP].reshape(-1, 2))
+        if swap > keep:
+            log.info("camera %s: left/right labels swapped against %s (%d vs %d inliers): corrected",
+                     cams[c].name, cams[ref].name, swap, keep)
+            uv[:, c] = uv[:, c][:, LR_SWAP]
+    return uv
+
+
 def _subsample(uv: np.ndarray, max_frames: int) -> np.ndarray:
     step = max(1, int(np.ceil(len(uv) / max_frames)))
     return uv[::step]
@@ -101,6 +138,7 @@ def self_calibrate(
     for c in range(C):
         if seen[:, c].sum() < 20:
             raise CalibrateError(f"camera {cams0[c].name} saw only {int(seen[:, c].sum())} labelled markers")
+    uv = fix_mirrored_cameras(cams0, uv)
     n_pose = max(1, int(round(fps)))
     pose_uv = uv[:n_pose]
     sub = _subsample(uv, max_frames)

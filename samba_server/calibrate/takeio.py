@@ -42,9 +42,11 @@ def _views_from_blobs(blobs: list[list[np.ndarray | None]], K: int) -> np.ndarra
     return uv
 
 
-def read_videos(directory: Path, names: list[str], K: int | None, progress=None) -> np.ndarray:
+def read_videos(directory: Path, names: list[str], K: int | None, progress=None, rig=None,
+                fps: float = 60.0) -> np.ndarray:
     """Videos ``<name>.avi`` (or any extension) -> (F, C, K, 2) unlabelled (K given) or
-    (F, C, 8, 2) labelled (K None, mote pipeline). Frames are synchronised by index."""
+    (F, C, 8, 2) labelled (K None, mote pipeline; ``rig`` tells the pipeline where each camera
+    stands, which decides left/right in the T-pose labelling). Frames are synchronised by index."""
     import cv2
 
     from samba_mote.detect import Detector
@@ -63,7 +65,7 @@ def read_videos(directory: Path, names: list[str], K: int | None, progress=None)
     if K is None:
         from samba_mote.pipeline import MotePipeline
 
-        pipes = [MotePipeline(mote_id=n) for n in names]
+        pipes = [MotePipeline(mote_id=n, calibration=rig) for n in names]
     else:
         dets = [Detector() for _ in names]
     rows = []
@@ -83,7 +85,7 @@ def read_videos(directory: Path, names: list[str], K: int | None, progress=None)
             if K is None:
                 row = np.full((len(names), N_MARKERS, 2), np.nan)
                 for c, (p, img) in enumerate(zip(pipes, frames)):
-                    pk = p.process(int(f * 1e9 / 60), img)
+                    pk = p.process(int(round(f * 1e9 / fps)), img)
                     _fill_labelled(row[c], pk)
                 rows.append(row)
             else:
@@ -181,13 +183,15 @@ def read_npz(path: Path, names: list[str], K: int | None) -> np.ndarray:
     return uv
 
 
-def read_take(take: str | os.PathLike, names: list[str], K: int | None, progress=None) -> np.ndarray:
-    """Dispatch on the kind of TAKE (directory of videos, .mcap, .npz); see module doc."""
+def read_take(take: str | os.PathLike, names: list[str], K: int | None, progress=None, rig=None,
+              fps: float = 60.0) -> np.ndarray:
+    """Dispatch on the kind of TAKE (directory of videos, .mcap, .npz); see module doc.
+    ``rig`` and ``fps`` only matter for labelled videos (mote pipeline)."""
     p = Path(take)
     if not p.exists():
         raise TakeError(f"{p}: not found")
     if p.is_dir():
-        return read_videos(p, names, K, progress)
+        return read_videos(p, names, K, progress, rig, fps)
     if p.suffix == ".mcap":
         return read_mcap(p, names, K)
     if p.suffix == ".npz":

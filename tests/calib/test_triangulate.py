@@ -105,3 +105,11 @@ def test_point_behind_a_camera_is_rejected() -> None:
     uv = np.array([[[80.0, 60.0]], [[100.0, 60.0]]])
     res = triangulate(rig, uv)
     assert np.isnan(res.points[0]).all() and res.n_views[0] == 0
+
+
+def test_single_camera_rig_gives_nan_not_an_error() -> None:
+    rig = CameraRig(default_rig(2).cameras[:1])
+    res = Triangulator(rig).triangulate(rig.project(np.zeros((3, 3)) + [0, 0, 1.0]))
+    assert np.isnan(res.points).all() and list(res.n_views) == [0, 0, 0]
+    with pytest.raises(ValueError):
+        Triangulator(CameraRig([]))

@@ -82,5 +82,5 @@ def test_static_distractor_is_masked_and_moving_marker_kept() -> None:
         counts.append(len(d))
         if k > 35:
             assert np.linalg.norm(d.uv[0] - uv[1]) < 0.2
-    assert counts[:29] == [2] * 29 and counts[-40:] == [1] * 40
+    assert counts[:25] == [2] * 25 and counts[-40:] == [1] * 40  # learnt within ~static_frames
     assert det.masked >= 40

@@ -67,17 +67,19 @@ def test_bvh_take_stays_in_view(tmp_path) -> None:
     assert vis[:, :60].all()  # nothing hides a marker during the T-pose
 
 
-def test_occlusion_hides_markers_behind_the_body(tmp_path) -> None:
-    joints, t = synthetic_motion(2.0, 60.0, turn_deg=0.0)
-    joints = joints.copy()
-    joints[:, :, 1] += 0.0
-    rig = CameraRig.load  # noqa: F841  (documentation: any rig works)
-    from samba_common.calib import default_rig
+def test_occlusion_hides_markers_behind_the_body() -> None:
+    from samba_mote.sim.motion import DEFAULT_LENGTHS
     from samba_mote.sim.render import occluded
+    from samba_mote.sim.tpose import tpose
 
-    back_cam = default_rig(4).cameras[2]  # behind the subject
-    hidden = occluded(joints, back_cam.center, SimConfig())
-    assert not hidden.all() and hidden.any() is not None
+    pose = tpose(DEFAULT_LENGTHS)[None]  # facing +Y, right hand toward +X
+    side = occluded(pose, np.array([5.0, 0.0, pose[0, J["right_wrist"], 2]]), SimConfig())[0]
+    # seen from the subject's right at shoulder height: the left arm and shoulder are behind
+    # the right arm (which also hides its own shoulder), the right wrist is in plain view
+    assert side[2] and side[0] and side[1]
+    assert not side[3]
+    front = occluded(pose, np.array([0.0, 5.0, 1.2]), SimConfig())[0]
+    assert not front.any()
 
 
 def test_cli_writes_take_and_rig(tmp_path) -> None:
