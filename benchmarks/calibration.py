@@ -101,7 +101,7 @@ def bench_wand(frames: int, seeds: int) -> tuple[list[str], CameraRig, CameraRig
 def bench_floor(rig: CameraRig, est: CameraRig) -> tuple[list[str], CameraRig]:
     lf = simulate_lframe(rig, 240, 0.2, seed=11, arms=(0.5, 0.7), height=0.0)
     P = triangulate_static(est, lf.uv)
-    A, b = lframe_transform(P)
+    A, b = lframe_transform(P, arms=(0.5, 0.7))
     world = apply_transform(est, A, b)
     ce, re = pose_errors(world, rig, mode="absolute")
     line = (f"- L-frame 0.5 x 0.7 m, 240 frames (4 s), world from the recovered calibration: camera centres within "

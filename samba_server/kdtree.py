@@ -38,45 +38,9 @@ class KDTree:
     def build(points: np.ndarray, leaf_size: int = LEAF_SIZE) -> "KDTree":
         """Build over points (N, D) (split on the widest dimension at the median)."""
         data = np.ascontiguousarray(points, dtype=np.float64)
-        n = len(data)
-        if n == 0:
+        if len(data) == 0:
             raise ValueError("cannot build a KD-tree over no points")
-        perm = np.arange(n, dtype=np.int64)
-        start, end, dim, val, left, right = [], [], [], [], [], []
-
-        def node(lo: int, hi: int) -> int:
-            i = len(start)
-            start.append(lo)
-            end.append(hi)
-            dim.append(0)
-            val.append(0.0)
-            left.append(-1)
-            right.append(-1)
-            if hi - lo > leaf_size:
-                pts = data[perm[lo:hi]]
-                d = int(np.argmax(pts.max(axis=0) - pts.min(axis=0)))
-                mid = (hi - lo) // 2
-                order = np.argpartition(pts[:, d], mid)
-                perm[lo:hi] = perm[lo:hi][order]
-                dim[i] = d
-                val[i] = float(data[perm[lo + mid], d])
-                left[i] = node(lo, lo + mid)
-                right[i] = node(lo + mid, hi)
-            return i
-
-        import sys
-
-        limit = sys.getrecursionlimit()
-        sys.setrecursionlimit(max(limit, 10_000))
-        try:
-            node(0, n)
-        finally:
-            sys.setrecursionlimit(limit)
-        as_i = lambda a: np.asarray(a, dtype=np.int64)  # noqa: E731
-        box_lo = np.array([data[perm[a:b]].min(axis=0) for a, b in zip(start, end)])
-        box_hi = np.array([data[perm[a:b]].max(axis=0) for a, b in zip(start, end)])
-        return KDTree(data, perm, as_i(start), as_i(end), as_i(dim), np.asarray(val, np.float64), as_i(left),
-                      as_i(right), box_lo, box_hi)
+        return KDTree(data, *_build(data, leaf_size))
 
     def arrays(self) -> tuple:
         """The tree as a tuple of arrays, the argument form of :func:`knn`."""
@@ -85,6 +49,59 @@ class KDTree:
     def query(self, q: np.ndarray, k: int) -> np.ndarray:
         """Indices (min(k, N),) of the nearest points to q (D,), nearest first."""
         return knn(*self.arrays(), np.ascontiguousarray(q, dtype=np.float64), min(k, len(self.data)))
+
+
+@njit(cache=True)
+def _build(data, leaf_size):
+    """Compiled tree construction: (perm, start, end, dim, val, left, right, lo, hi)."""
+    n, D = data.shape
+    max_nodes = 2 * (n // max(leaf_size // 2, 1) + 1) + 1
+    perm = np.arange(n)
+    start = np.empty(max_nodes, np.int64)
+    end = np.empty(max_nodes, np.int64)
+    dim = np.zeros(max_nodes, np.int64)
+    val = np.zeros(max_nodes)
+    left = np.full(max_nodes, -1, np.int64)
+    right = np.full(max_nodes, -1, np.int64)
+    lo = np.empty((max_nodes, D))
+    hi = np.empty((max_nodes, D))
+    stack = np.empty(max_nodes, np.int64)
+    start[0], end[0] = 0, n
+    count, sp = 1, 1
+    stack[0] = 0
+    while sp > 0:
+        sp -= 1
+        nd = stack[sp]
+        a, b = start[nd], end[nd]
+        for c in range(D):
+            mn, mx = np.inf, -np.inf
+            for j in range(a, b):
+                v = data[perm[j], c]
+                mn = min(mn, v)
+                mx = max(mx, v)
+            lo[nd, c], hi[nd, c] = mn, mx
+        if b - a <= leaf_size:
+            continue
+        d = 0
+        for c in range(1, D):
+            if hi[nd, c] - lo[nd, c] > hi[nd, d] - lo[nd, d]:
+                d = c
+        seg = perm[a:b].copy()
+        order = np.argsort(data[seg, d])
+        perm[a:b] = seg[order]
+        mid = a + (b - a) // 2
+        dim[nd], val[nd] = d, data[perm[mid], d]
+        for child, (ca, cb) in enumerate(((a, mid), (mid, b))):
+            start[count], end[count] = ca, cb
+            if child == 0:
+                left[nd] = count
+            else:
+                right[nd] = count
+            stack[sp] = count
+            sp += 1
+            count += 1
+    return (perm, start[:count].copy(), end[:count].copy(), dim[:count].copy(), val[:count].copy(),
+            left[:count].copy(), right[:count].copy(), lo[:count].copy(), hi[:count].copy())
 
 
 @njit(cache=True)

@@ -397,56 +397,59 @@ def _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, targe
 
 
 @njit(cache=True)
-def _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm):
-    body = np.empty((13, 3))
+def _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm, Jq, body):
+    """Fill Jm (n_res, 27) with the Jacobian of :func:`_residuals`; Jq (13, 3, 27) and body
+    (13, 3) are work arrays."""
     body_joints(dirs, lengths, body)
-    Jq = np.zeros((13, 3, 27))
+    Jq[:] = 0.0
     for j in range(13):
-        for k in range(3):  # rotation: R (e_k x b)
-            e = np.zeros(3)
-            e[k] = 1.0
-            cb = _cross(e, body[j])
-            for i in range(3):
-                Jq[j, i, k] = R[i, 0] * cb[0] + R[i, 1] * cb[1] + R[i, 2] * cb[2]
-            Jq[j, k, 3 + k] = 1.0
+        b0, b1, b2 = body[j, 0], body[j, 1], body[j, 2]
+        for i in range(3):  # rotation: R (e_k x b); e_x x b = (0, -b2, b1) etc.
+            Jq[j, i, 0] = -R[i, 1] * b2 + R[i, 2] * b1
+            Jq[j, i, 1] = R[i, 0] * b2 - R[i, 2] * b0
+            Jq[j, i, 2] = -R[i, 0] * b1 + R[i, 1] * b0
+            Jq[j, i, 3 + i] = 1.0
+    Jm[:39] = 0.0
     for b in range(11):
         L = lengths[BONE_LENGTH[b]]
         for kk in range(2):
             col = param_col(b, kk)
             if col < 0:
                 continue
-            wt = np.empty(3)
-            for i in range(3):
-                wt[i] = L * (R[i, 0] * T[b, kk, 0] + R[i, 1] * T[b, kk, 1] + R[i, 2] * T[b, kk, 2])
+            t0, t1, t2 = T[b, kk, 0], T[b, kk, 1], T[b, kk, 2]
+            w0 = L * (R[0, 0] * t0 + R[0, 1] * t1 + R[0, 2] * t2)
+            w1 = L * (R[1, 0] * t0 + R[1, 1] * t1 + R[1, 2] * t2)
+            w2 = L * (R[2, 0] * t0 + R[2, 1] * t1 + R[2, 2] * t2)
             for j in range(13):
                 g = Gm[j, 1 + b]
                 if g != 0.0:
-                    for i in range(3):
-                        Jq[j, i, col] = g * wt[i]
-    Jv = np.zeros((39, 27))
-    for b in range(11):
-        for kk in range(2):
-            col = param_col(b, kk)
-            if col >= 0:
-                for c in range(3):
-                    Jv[3 * b + c, col] = T[b, kk, c]
+                    Jq[j, 0, col] = g * w0
+                    Jq[j, 1, col] = g * w1
+                    Jq[j, 2, col] = g * w2
+            for r in range(39):  # prior: W @ (tangent in the rows of bone b)
+                Jm[r, col] = W[r, 3 * b] * t0 + W[r, 3 * b + 1] * t1 + W[r, 3 * b + 2] * t2
     M = np.dot(RA.T, R)
-    for c in range(3):
-        Jv[33 + c, 0] = M[c, 2]
-        Jv[33 + c, 2] = -M[c, 0]
-        Jv[36 + c, 0] = -M[c, 1]
-        Jv[36 + c, 1] = M[c, 0]
-    Jm[:39] = np.dot(W, Jv)
+    for r in range(39):  # prior: torso y, z axes in the marker frame
+        wy0, wy1, wy2 = W[r, 33], W[r, 34], W[r, 35]
+        wz0, wz1, wz2 = W[r, 36], W[r, 37], W[r, 38]
+        Jm[r, 0] = wy0 * M[0, 2] + wy1 * M[1, 2] + wy2 * M[2, 2] - (wz0 * M[0, 1] + wz1 * M[1, 1] + wz2 * M[2, 1])
+        Jm[r, 1] = wz0 * M[0, 0] + wz1 * M[1, 0] + wz2 * M[2, 0]
+        Jm[r, 2] = -(wy0 * M[0, 0] + wy1 * M[1, 0] + wy2 * M[2, 0])
     k = 39
+    inv_m = 1.0 / sigma_m
     for i in range(8):
         if seen[i]:
+            j = MARKER_JOINTS[i]
             for c in range(3):
-                Jm[k] = Jq[MARKER_JOINTS[i], c] / sigma_m
+                for col in range(27):
+                    Jm[k, col] = Jq[j, c, col] * inv_m
                 k += 1
     if smooth:
+        inv_s = 1.0 / sigma_s
         for j in range(13):
             for c in range(3):
-                Jm[k] = Jq[j, c] / sigma_s
+                for col in range(27):
+                    Jm[k, col] = Jq[j, c, col] * inv_s
                 k += 1
 
 
@@ -488,13 +491,15 @@ def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
     q = np.empty((13, 3))
     q_new = np.empty((13, 3))
     Jm = np.empty((n_res, 27))
+    Jq = np.empty((13, 3, 27))
+    body = np.empty((13, 3))
     cost = _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
     lam = 1e-3
     it = 0
     while it < max_iter:
         it += 1
         T = _tangents(dirs)
-        _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm)
+        _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm, Jq, body)
         A = np.dot(Jm.T, Jm)
         g = np.dot(Jm.T, r)
         accepted = False

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from samba_common.align import batch_frames
-from samba_common.body import D, fk_body
+from samba_common.body import fk_body, standard_pose
 from samba_common.skeleton import BONE_TYPES, MARKER_JOINT, N_JOINTS, N_MARKERS
 
 from .db import MotionDB, load_default_db
@@ -103,7 +103,14 @@ class PoseIndex:
         origin, R_A = batch_frames(markers)
         self.features = np.einsum("fpi,fij->fpj", markers - origin[:, None], R_A).reshape(len(db), -1)
         self.R_A = np.ascontiguousarray(R_A)
-        self.trees = {cols.tobytes(): KDTree.build(self.features[:, cols]) for cols in (WHOLE[0], *PART_FEATURES)}
+        self._trees: dict[bytes, KDTree] = {}
+
+    def tree(self, cols: np.ndarray) -> KDTree:
+        """The KD-tree over feature columns ``cols`` (built on first use)."""
+        key = cols.tobytes()
+        if key not in self._trees:
+            self._trees[key] = KDTree.build(self.features[:, cols])
+        return self._trees[key]
 
 
 def _padded(dims: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -166,6 +173,15 @@ class Reconstructor:
         self.lengths = lengths
         self.index = PoseIndex(self.db, lengths)
 
+    def warm_up(self) -> None:
+        """Compile the solver now rather than on the first live frame (the very first run on a
+        machine compiles for about a minute; later runs load the compiled code from disk)."""
+        lengths = self.lengths if self.lengths is not None else self.db.mean_lengths
+        probe = Reconstructor(self.db, self.config, lengths)
+        markers = standard_pose(lengths)[list(MARKER_JOINT)]
+        for i in range(3):
+            probe.solve(markers, i / 30.0)
+
     def reset(self) -> None:
         """Forget the temporal history (a new take or a long gap); keeps the body."""
         self._hist = _History()
@@ -177,7 +193,7 @@ class Reconstructor:
         if self._estimating:
             self._body_buffer.append(markers)
             n = len(self._body_buffer)
-            if self.lengths is None or n % 10 == 0 or n >= self.config.body_frames:
+            if self.lengths is None or n == self.config.body_frames // 3 or n >= self.config.body_frames:
                 try:
                     self.set_lengths(estimate_lengths(np.array(self._body_buffer), self.db.mean_lengths))
                 except ProportionError:
@@ -199,7 +215,7 @@ class Reconstructor:
             self.reset()
             h = self._hist
         parts = PART_FEATURES if cfg.parts else WHOLE[:1]
-        trees = tuple(self.index.trees[c.tobytes()].arrays() for c in parts)
+        trees = tuple(self.index.tree(c).arrays() for c in parts)
         feat_cols, n_cols = self._cols[cfg.parts]
         dims, n_dims = self._dims[cfg.parts]
         status, q, R, o, d, iters, resid, n_seen = kernels.frame(

@@ -79,7 +79,9 @@ def make_reconstructor(db_path: str | None):
         from .db import MotionDB
 
         db = MotionDB.load(db_path)
-    return Reconstructor(db=db)
+    rec = Reconstructor(db=db)
+    rec.warm_up()  # compile before the first live frame
+    return rec
 
 
 def build_server(calibration: str | os.PathLike, configs: ServerConfigs, db: str | None = None,

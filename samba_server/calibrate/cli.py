@@ -34,17 +34,31 @@ def _parse_arms(text: str) -> tuple[float, float]:
     return a, b
 
 
+class _Counter:
+    """Frames-read counter on stderr for work of unknown length; silent if not a TTY."""
+
+    def __init__(self, label: str):
+        self.label = label
+        self.enabled = sys.stderr.isatty()
+        self.n = 0
+
+    def __call__(self, n: int) -> None:
+        self.n = n
+        if self.enabled and n % 25 == 0:
+            sys.stderr.write(f"\r{self.label}: {n}")
+            sys.stderr.flush()
+
+    def __enter__(self) -> "_Counter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.enabled and self.n:
+            sys.stderr.write(f"\r{self.label}: {self.n}\n")
+
+
 def _progress(label: str):
-    from samba_common.progress import Progress
-
-    bar = Progress(0, label)
-    bar.total = 10**9  # unknown: shows a running count
-
-    def cb(n: int) -> None:
-        bar.done = n - 1
-        bar.update(1)
-
-    return bar, cb
+    c = _Counter(label)
+    return c, c
 
 
 def _floor_from_lframe(rig: CameraRig, take: str, arms, height: float) -> CameraRig:
@@ -53,12 +67,10 @@ def _floor_from_lframe(rig: CameraRig, take: str, arms, height: float) -> Camera
 
     uv = read_take(take, rig.names, 3)
     P = triangulate_static(rig, uv)
-    A, b = lframe_transform(P, height)
+    A, b = lframe_transform(P, height, arms)
     out = apply_transform(rig, A, b)
-    if arms is not None:
-        Pn = P @ A.T + b
-        d = sorted(np.linalg.norm(Pn[1:] - Pn[0], axis=1)) if np.linalg.norm(Pn[0] - [0, 0, height]) < 1e-6 else None
-        log.info("L-frame markers in the new world: %s (arms expected %s, measured %s)", Pn.round(4), arms, d)
+    Pn = P @ A.T + b
+    log.info("L-frame markers in the new world (m): %s", np.array2string(Pn, precision=4))
     return out
 
 

@@ -76,8 +76,13 @@ def triangulate_static(rig: CameraRig, uv: np.ndarray) -> np.ndarray:
     return np.median(P, axis=0)
 
 
-def lframe_transform(points: np.ndarray, height: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """World change from three L-frame marker positions (3, 3) in any order (see module doc)."""
+def lframe_transform(points: np.ndarray, height: float = 0.0,
+                     arms: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """World change from three L-frame marker positions (3, 3) in any order (see module doc).
+
+    With the arm lengths ``arms`` (short, long) known, the rigid L-frame model is fitted to
+    all three markers (least squares), which spreads their errors instead of trusting the
+    corner and the short arm alone."""
     P = np.asarray(points, float)
     if P.shape != (3, 3) or not np.all(np.isfinite(P)):
         raise CalibrateError("the L-frame needs three triangulated markers")
@@ -89,14 +94,28 @@ def lframe_transform(points: np.ndarray, height: float = 0.0) -> tuple[np.ndarra
             best, corner = cosang, k
     if best > np.cos(np.radians(75)):
         raise CalibrateError(f"the three markers do not form a right angle (best {np.degrees(np.arccos(best)):.0f} deg)")
-    arms = [P[j] - P[corner] for j in range(3) if j != corner]
-    arms.sort(key=np.linalg.norm)
-    x_arm, y_arm = arms
+    vecs = [P[j] - P[corner] for j in range(3) if j != corner]
+    vecs.sort(key=np.linalg.norm)
+    x_arm, y_arm = vecs
     if abs(np.linalg.norm(y_arm) - np.linalg.norm(x_arm)) < 0.02:
         raise CalibrateError("L-frame arms have nearly equal length: cannot tell X from Y")
     z = _unit(np.cross(x_arm, y_arm))
     origin = P[corner] - height * z
-    return frame_from_axes(origin, x_arm, z)
+    A, b = frame_from_axes(origin, x_arm, z)
+    if arms is None:
+        return A, b
+    # refine: rigid fit of the model (world coordinates) to the measured markers
+    others = [j for j in range(3) if j != corner]
+    others.sort(key=lambda j: np.linalg.norm(P[j] - P[corner]))
+    meas = P[[corner] + others]
+    model = np.array([[0.0, 0.0, height], [arms[0], 0.0, height], [0.0, arms[1], height]])
+    mm, pm = model.mean(axis=0), meas.mean(axis=0)
+    U, _, Vt = np.linalg.svd((meas - pm).T @ (model - mm))
+    R = Vt.T @ np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))]) @ U.T  # measured -> model
+    res = np.linalg.norm((meas - pm) @ R.T + mm - model, axis=1)
+    if res.max() > 0.05:
+        raise CalibrateError(f"L-frame markers are {1000 * res.max():.0f} mm off the given arms {arms}: check --lframe")
+    return R, mm - R @ pm
 
 
 def standard_pose_transform(markers: np.ndarray, ankle_height: float = 0.08) -> tuple[np.ndarray, np.ndarray]:

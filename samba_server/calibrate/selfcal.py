@@ -180,7 +180,29 @@ def self_calibrate(
     cams = transform_rig(cams, np.eye(3), np.zeros(3), s)
     A, b = standard_pose_transform(_triangulate(cams, pose_uv), ankle_height)
     cams = transform_rig(cams, A, b)
+    fwd = knee_forward(_triangulate(cams, sub))
+    if fwd < 0:
+        # every camera's left/right labels were mirrored (motes labelled without knowing where
+        # they stand): the subject faced -Y. Turn the world half a turn about Z.
+        log.info("knees bend towards -Y (%.3f m): labels were mirrored, world turned by 180 deg", fwd)
+        cams = transform_rig(cams, np.diag([-1.0, -1.0, 1.0]), np.zeros(3))
     return CameraRig(cams, dict(rig.metadata)), SelfCalReport(rms, nobs, len(sub), source)
+
+
+def knee_forward(markers: np.ndarray) -> float:
+    """Mean offset (m) along +Y of the knees from the shoulder-ankle line of the same side,
+    over the frames where it exceeds 3 cm: knees bend forwards, so a subject labelled and
+    framed correctly (facing +Y) gives a positive value. markers: (F, 8, 3)."""
+    d = []
+    for side in ("left", "right"):
+        s, k, a = (markers[:, M[f"{side}_{j}"]] for j in ("shoulder", "knee", "ankle"))
+        u = s - a
+        t = np.sum((k - a) * u, axis=1) / np.maximum(np.sum(u * u, axis=1), 1e-9)
+        off = k - (a + t[:, None] * u)
+        d.append(off[:, 1])
+    d = np.concatenate(d)
+    d = d[np.isfinite(d) & (np.abs(np.nan_to_num(d)) > 0.03)]
+    return float(np.mean(d)) if len(d) else 0.0
 
 
 def _initialise(cams0, uv, sub, seen, i, j, max_frames):

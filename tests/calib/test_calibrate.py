@@ -114,6 +114,11 @@ def test_lframe_floor_recovers_the_world() -> None:
     fixed = apply_transform(moved, A, b)
     ce, re = pose_errors(fixed, rig, mode="absolute")
     assert ce.max() < 0.03 and re.max() < 0.3
+    A, b = lframe_transform(P, height=0.012, arms=(0.5, 0.7))  # rigid model fit
+    ce2, re2 = pose_errors(apply_transform(moved, A, b), rig, mode="absolute")
+    assert ce2.max() < 0.03 and re2.max() < 0.3
+    with pytest.raises(CalibrateError, match="off the given arms"):
+        lframe_transform(P, arms=(0.3, 0.4))
     with pytest.raises(CalibrateError, match="right angle"):
         lframe_transform(np.array([[0, 0, 0], [1.0, 0, 0], [2.0, 0.1, 0]]))
     with pytest.raises(CalibrateError, match="equal length"):
@@ -199,3 +204,21 @@ def test_reconstruction_with_recovered_calibration_matches_true_calibration() ->
     d = np.linalg.norm(j_est - j_true, axis=2)
     assert np.isfinite(d).mean() > 0.9
     assert np.nanmean(d) < 0.003
+
+
+@pytest.mark.parametrize("mirrored", [(2, 3), (0, 1, 2, 3)])
+def test_self_calibration_undoes_mirrored_labels(mirrored) -> None:
+    """Motes that labelled the T-pose without knowing their side swap left and right; the
+    self-calibration detects it per camera (epipolar fit) and for the whole rig (knees bend
+    forwards) and still returns the true world."""
+    from samba_server.calibrate.selfcal import LR_SWAP
+
+    rig = default_rig(4)
+    sub = simulate_subject(rig, seconds=6.0, noise_px=0.2, seed=12)
+    uv = sub.uv.copy()
+    for c in mirrored:
+        uv[:, c] = uv[:, c][:, LR_SWAP]
+    tibia = float(np.median(np.linalg.norm(sub.points[:, 4] - sub.points[:, 6], axis=1)))
+    out, _ = self_calibrate(_intrinsics_only(rig), uv, tibia=tibia, max_frames=120)
+    ce, re = pose_errors(out, rig, mode="absolute")
+    assert ce.max() < 0.1 and re.max() < 1.0

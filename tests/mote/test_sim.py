@@ -10,7 +10,7 @@ import numpy as np
 from samba_common.calib import CameraRig
 from samba_common.formats import load_joints, load_markers
 from samba_common.skeleton import J, MARKER_JOINT
-from samba_mote.sim import SimConfig, make_take, synthetic_motion
+from samba_mote.sim import SimConfig, make_take
 from samba_mote.sim.cli import main as sim_main
 from samba_mote.sources import open_source
 

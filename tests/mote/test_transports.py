@@ -210,8 +210,9 @@ def test_cli_serial_record_and_exit_codes(tmp_path, small_take) -> None:
     out = tmp_path / "rec.mcap"
     assert main(["--id", "cam1", "--source", f"file:{small_take.video('cam1')}", "--transport", "serial:loop://",
                  "--calibration", str(small_take.out_dir / "calibration.toml"), "--record", str(out),
-                 "--max-frames", "40"]) == 0
+                 "--preview", str(tmp_path / "preview"), "--max-frames", "40"]) == 0
     assert out.stat().st_size > 1000
+    assert len(list((tmp_path / "preview").glob("cam1_*.png"))) == 2  # frames 1 and 31
     assert main(["--id", "cam1", "--source", "nope:x", "--transport", "serial:loop://"]) == 2
     with pytest.raises(SystemExit) as exc:
         main(["--source", "sim:"])
@@ -233,3 +234,10 @@ def test_cli_sigterm_clean_shutdown(free_port: int) -> None:
             proc.kill()
     assert proc.returncode == 0, err
     assert "ended: stopped" in err and "frames in" in err
+
+
+def test_mote_package_imports_without_scipy() -> None:
+    """Motes are small boards: the mote code must not pull in scipy."""
+    code = ("import sys; import samba_mote.cli, samba_mote.gateway, samba_mote.pipeline, samba_mote.sources, "
+            "samba_mote.transports, samba_mote.runner; assert 'scipy' not in sys.modules, 'scipy imported'")
+    subprocess.run([sys.executable, "-c", code], check=True, timeout=60)

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from samba_common.wire import (FLAG_MERGED, FLAG_PREDICTED, FLAG_TRACKED, HEADER, MAX_MARKERS, MAX_PACKET,
+from samba_common.wire import (FLAG_MERGED, FLAG_PREDICTED, FLAG_TRACKED, HEADER, MAX_PACKET,
                                UNLABELLED, MarkerPacket, MoteStatus, PacketError, decode_packet,
                                decode_status, encode_packet, encode_status)
 
