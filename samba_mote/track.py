@@ -324,18 +324,22 @@ class MarkerTracker:
                 return self._output(uv, area, {m: int(b) for m, b in enumerate(self._init_index(uv))}, set(), n)
             if not self.initialised:
                 return self._unlabelled(uv, area)
-        pred = self.pos + self.vel * dt
-        step = np.linalg.norm(self.vel * dt, axis=1)
+        move = self.vel * dt
+        pred = self.pos + move
+        step = np.hypot(move[:, 0], move[:, 1])
         active = self.missing <= cfg.coast_frames  # merged tracks stay active
         gate = np.minimum(cfg.gate_px + cfg.gate_speed * step + cfg.gate_growth * self.stale, cfg.gate_max)
+        finite = np.isfinite(pred).all(axis=1)
         assigned: dict[int, int] = {}
         if n:
-            D = np.linalg.norm(pred[:, None, :] - uv[None, :, :], axis=2)
-            D[np.isnan(D)] = np.inf
+            D = np.hypot(pred[:, 0:1] - uv[:, 0], pred[:, 1:2] - uv[:, 1])
+            if not finite.all():
+                D[~finite] = np.inf
             # stage 1: active tracks; ties (two tracks at one place) go to the track measured
             # cleanly most recently
-            Da = np.where(active[:, None], D, np.inf)
-            assigned.update(_min_cost_assignment(Da, gate, Da + cfg.stale_penalty * self.stale[:, None]))
+            Da = D if active.all() else np.where(active[:, None], D, np.inf)
+            cost = Da + cfg.stale_penalty * self.stale[:, None] if self.stale.any() else None
+            assigned.update(_min_cost_assignment(Da, gate, cost))
         else:
             D = np.zeros((N_MARKERS, 0))
         # merge detection: an unassigned active track whose prediction lies inside an assigned
@@ -343,7 +347,6 @@ class MarkerTracker:
         blob_r = np.sqrt(np.maximum(area, 1.0) / np.pi)
         owner = {b: m for m, b in assigned.items()}
         merged: set[int] = set()
-        finite = np.isfinite(pred).all(axis=1)
         for m in range(N_MARKERS):
             if m in assigned or not n or not active[m] or not finite[m]:
                 continue
@@ -575,14 +578,19 @@ class MarkerTracker:
         return D.argmin(1)
 
     def _output(self, uv: np.ndarray, area: np.ndarray, assigned: dict[int, int], merged: set[int], n: int) -> TrackOutput:
+        """Packet records: one per marker (measured, predicted or lost; uncertain ones unlabelled),
+        then every blob no track claimed (unlabelled)."""
         labels, pts, areas, flags = [], [], [], []
+        uvl, arl = uv.tolist(), area.tolist()
+        posl, cert, miss = self.pos.tolist(), self.certain.tolist(), self.missing.tolist()
+        coast = self.cfg.coast_frames
         used = set(assigned.values())
         emitted: set[int] = set()
         for m in range(N_MARKERS):
-            if m in assigned:
-                b = assigned[m]
+            b = assigned.get(m)
+            if b is not None:
                 mflag = FLAG_MERGED if m in merged else 0
-                if not self.certain[m]:
+                if not cert[m]:
                     if b in emitted:
                         continue
                     labels.append(UNLABELLED)
@@ -591,21 +599,21 @@ class MarkerTracker:
                     labels.append(m)
                     flags.append(FLAG_TRACKED | mflag)
                 emitted.add(b)
-                pts.append(uv[b])
-                areas.append(area[b])
+                pts.append(uvl[b])
+                areas.append(arl[b])
             else:
                 labels.append(m)
-                pts.append(self.pos[m])
+                pts.append(posl[m])
                 areas.append(0)
-                flags.append(FLAG_PREDICTED if self.missing[m] <= self.cfg.coast_frames else FLAG_LOST)
+                flags.append(FLAG_PREDICTED if miss[m] <= coast else FLAG_LOST)
         for b in range(n):
             if b not in used:
                 labels.append(UNLABELLED)
-                pts.append(uv[b])
-                areas.append(area[b])
+                pts.append(uvl[b])
+                areas.append(arl[b])
                 flags.append(0)
-        return TrackOutput(np.asarray(labels, np.uint8), np.asarray(pts, np.float32).reshape(-1, 2),
-                           np.clip(np.asarray(areas), 0, 65535).astype(np.uint16), np.asarray(flags, np.uint8))
+        return TrackOutput(np.array(labels, np.uint8), np.array(pts, np.float32).reshape(-1, 2),
+                           np.clip(np.array(areas), 0, 65535).astype(np.uint16), np.array(flags, np.uint8))
 
     @staticmethod
     def _unlabelled(uv: np.ndarray, area: np.ndarray) -> TrackOutput:

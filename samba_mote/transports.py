@@ -121,7 +121,7 @@ class SerialTransport(_Ctx):
         try:
             self.port.write(frame(payload))
         except (serial.SerialException, OSError) as exc:
-            raise TransportError(f"serial write failed on {self.url}: {exc}") from None
+            raise TransportError(f"serial write failed on {self.url}: {type(exc).__name__} {exc}") from None
 
     send_markers = _write
     send_status = _write
@@ -236,7 +236,7 @@ class Resilient(_Ctx):
         except Exception as exc:
             self.errors += 1
             self.dropped += 1
-            log.warning("%s send failed (%s); reopening", self.what, exc)
+            log.warning("%s send failed (%s: %s); reopening", self.what, type(exc).__name__, exc)
             try:
                 self.inner.close()
             except Exception:

@@ -619,7 +619,8 @@ def _partial_knn(features, cols, n_cols, feature, k):
 
 @njit(cache=True)
 def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, features, feat_cols, n_cols,
-          R_A_db, db_dirs, k, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, sigma_m, accel, min_markers,
+          R_A_db, db_dirs, k, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, sigma_m, accel, smooth_floor,
+          min_markers,
           Gm, max_iter, tol):
     """The whole per-frame solve in one compiled call.
 
@@ -682,7 +683,7 @@ def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, f
     o_start = o0.copy()
     if has_state and n_hist == 2:  # the shoulder midpoint moves on at constant velocity
         o_start += 0.5 * (q1[LS] + q1[RS] - q2[LS] - q2[RS])
-    sigma_s = max(accel * dt * dt, 1e-3)
+    sigma_s = math.sqrt((accel * dt * dt) ** 2 + smooth_floor ** 2)
     R, o, d, q, it = solve_frame(db_dirs, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weight,
                                  R_A_db[nbrs[P - 1, 0]], RA, origin, obs, seen, sigma_m, smooth, target, sigma_s,
                                  has_state and has_pred, R0, o_start, d0, Gm, max_iter, tol)

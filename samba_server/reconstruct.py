@@ -45,7 +45,8 @@ class ReconstructConfig:
     k: neighbours; pseudo: pseudo-poses per neighbour; ball_sigma_deg / hinge_sigma_deg: joint
     angle noise of pseudo-poses; prior_floor_deg: smallest standard deviation of a direction
     component in the prior; prior_weight: multiplies the prior energy; sigma_marker: marker
-    noise (m); accel: typical joint acceleration (m/s^2) for the smoothness term; max_iter, tol: LM
+    noise (m); accel, smooth_floor: the smoothness term allows a second difference of
+    hypot(accel * dt^2, smooth_floor) metres (typical acceleration, prediction noise); max_iter, tol: LM
     iteration cap and relative energy decrease that stops it; min_markers:
     fewer observed markers make a frame "bridged" by the temporal model; max_gap: longest bridge
     (s), beyond it frames are NaN; max_iter: LM iteration cap; body_frames: frames used to
@@ -60,6 +61,7 @@ class ReconstructConfig:
     prior_weight: float = 0.5
     sigma_marker: float = 0.003
     accel: float = 80.0
+    smooth_floor: float = 0.01
     min_markers: int = 4
     max_gap: float = 0.3
     max_iter: int = 10
@@ -222,7 +224,7 @@ class Reconstructor:
             markers, has_pred, h.n, h.q1, h.q2, h.has_state, h.R, h.o, h.dirs, t - h.t_last if h.n else 0.0,
             trees, self.index.features, feat_cols, n_cols, self.index.R_A, self.db.dirs, min(cfg.k, len(self.db)),
             dims, n_dims, self._cos, self._sin, self.lengths, self._floor2, cfg.prior_weight, cfg.sigma_marker,
-            cfg.accel, cfg.min_markers, kernels.G, cfg.max_iter, cfg.tol)
+            cfg.accel, cfg.smooth_floor, cfg.min_markers, kernels.G, cfg.max_iter, cfg.tol)
         if status == 2:
             return PoseResult(q, float("nan"), int(n_seen), 0, "unsolved")
         h.q2, h.q1, h.n = h.q1, q, min(h.n + 1, 2)
