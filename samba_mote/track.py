@@ -1,18 +1,20 @@
 """Marker identities in one camera: T-pose labelling, then frame-to-frame tracking.
 
-* **Labelling** (:func:`label_tpose`): the 8 markers of a T-pose lie almost in one plane (the
-  body's frontal plane), so their image is an affine image of a planar template. Blobs are
-  grouped by height (4 upper = shoulders + wrists, then knees, then ankles), the outer upper
-  pair are wrists, and left/right follows from the view: seen from the front the subject's
-  right is on the image left. With more than 8 blobs (clutter), every 8-subset is tried and
-  the one with the smallest normalised affine residual wins. Front/back comes from the
-  camera calibration when the mote has one, else from ``TrackConfig.tpose_view``.
+* **Labelling** from the standard pose (:func:`samba_mote.tpose_label.label_tpose`), seen
+  from the front or the back: from the camera calibration when the mote has one, else from
+  ``TrackConfig.tpose_view``. Re-checked every ``recheck_every`` frames.
 * **Tracking** (:class:`MarkerTracker`): constant-velocity prediction (alpha-beta filter),
   gating, minimum-distance assignment (exact within small conflicting groups), merge
   detection (a blob that also holds another track's prediction, or is much larger than
   expected, is flagged MERGED for every track inside it and does not update their motion),
   coasting through short gaps (PREDICTED), then LOST with a growing re-acquisition gate.
-  If most markers stay lost, the tracker re-labels from the next T-pose it sees.
+  If most markers stay lost, the tracker re-labels from the next T-pose it sees. A merged
+  pair is followed through the merge by splitting its blob along the long axis.
+* **Certainty**: when a merge ends ambiguously (small assignment margin, never seen apart,
+  one marker hidden by the other, an unknown marker in the blob) or a track comes back from a
+  gap next to another, its identity is in doubt and it is published unlabelled with
+  FLAG_UNCERTAIN instead of risking a swap. Identities come back with a T-pose or by
+  elimination (all 8 seen as separate blobs, one in doubt).
 * **Unlabelled mode**: every blob goes out with label 255 (wand calibration).
 
 Units: pixels and pixels per second; time from the frame's ``t_ns``.
@@ -20,7 +22,6 @@ Units: pixels and pixels per second; time from the frame's ``t_ns``.
 
 from __future__ import annotations
 
-import itertools
 import logging
 from dataclasses import dataclass
 
@@ -29,18 +30,14 @@ import numpy as np
 from samba_common.skeleton import N_MARKERS
 from samba_common.wire import FLAG_LOST, FLAG_MERGED, FLAG_PREDICTED, FLAG_TRACKED, FLAG_UNCERTAIN, UNLABELLED
 
+from .assign import _min_cost_assignment
+from .tpose_label import (L_AN, L_KN, L_SH, L_WR, R_AN, R_KN, R_SH, R_WR, TPOSE_TEMPLATE, label_tpose,
+                          view_from_calibration)
+
 log = logging.getLogger(__name__)
 
-# marker indices (MARKER_NAMES order)
-L_SH, R_SH, L_WR, R_WR, L_KN, R_KN, L_AN, R_AN = range(8)
-
-#: planar T-pose template, (8, 2): x toward the subject's right (m), z up (m)
-TPOSE_TEMPLATE = np.array([
-    [-0.18, 1.45], [0.18, 1.45],  # shoulders
-    [-0.72, 1.45], [0.72, 1.45],  # wrists
-    [-0.16, 0.50], [0.16, 0.50],  # knees (feet apart, see samba_mote.sim.tpose)
-    [-0.22, 0.08], [0.22, 0.08],  # ankles
-])
+__all__ = ["MarkerTracker", "TrackConfig", "TrackOutput", "label_tpose", "view_from_calibration",
+           "TPOSE_TEMPLATE", "L_SH", "R_SH", "L_WR", "R_WR", "L_KN", "R_KN", "L_AN", "R_AN"]
 
 
 @dataclass(frozen=True)
@@ -65,7 +62,6 @@ class TrackConfig:
     recheck_every: int = 15  #: look for a T-pose every this many frames (exactly 8 blobs) and re-label if it disagrees
     split_margin: float = 1.0  #: px; a split decided by less than this makes both labels uncertain
     doubt_after_gap: int = 2  #: a track back after more missing frames than this, near another, is uncertain
-    recover_frames: int = 6  #: frames one plausible labelling of uncertain markers must hold
     merge_margin: float = 1.0  #: px added to a blob's radius when testing predictions inside it
     merge_area_ratio: float = 1.35  #: blob area / expected area that means two markers
     reinit_lost: int = 5  #: re-label from a T-pose when at least this many markers are lost
@@ -88,147 +84,6 @@ class TrackOutput:
     flags: np.ndarray
 
 
-def view_from_calibration(camera) -> str | None:
-    """"front" if the subject's right (+X) appears on the image left for a subject at the origin,
-    "back" if on the right, None for a side view (|du| < 5 px per metre)."""
-    p = camera.project(np.array([[0.0, 0.0, 1.2], [0.5, 0.0, 1.2]]))
-    du = (p[1, 0] - p[0, 0]) / 0.5
-    if not np.isfinite(du) or abs(du) < 5.0:
-        return None
-    return "front" if du < 0 else "back"
-
-
-def _assign_layout(uv: np.ndarray, right_is_left: bool) -> np.ndarray:
-    """uv (8, 2) blobs of a T-pose -> (8,) blob index per marker (MARKER_NAMES order)."""
-    by_v = np.argsort(uv[:, 1], kind="stable")
-    upper, knees, ankles = by_v[:4], by_v[4:6], by_v[6:8]
-    upper = upper[np.argsort(uv[upper, 0], kind="stable")]
-    out = np.empty(8, np.int64)
-
-    def lr(pair):  # (left marker blob, right marker blob)
-        a, b = pair if uv[pair[0], 0] <= uv[pair[1], 0] else pair[::-1]
-        return (b, a) if right_is_left else (a, b)
-
-    out[L_WR], out[R_WR] = lr(np.array([upper[0], upper[3]]))
-    out[L_SH], out[R_SH] = lr(np.array([upper[1], upper[2]]))
-    out[L_KN], out[R_KN] = lr(knees)
-    out[L_AN], out[R_AN] = lr(ankles)
-    return out
-
-
-def _affine_residual(src: np.ndarray, dst: np.ndarray) -> float:
-    """RMS residual of the best affine map src (8, 2) -> dst (8, 2), divided by dst's height span."""
-    A = np.hstack([src, np.ones((len(src), 1))])
-    coef, *_ = np.linalg.lstsq(A, dst, rcond=None)
-    res = A @ coef - dst
-    span = max(float(np.ptp(dst[:, 1])), 1e-6)
-    return float(np.sqrt((res ** 2).sum(1).mean()) / span)
-
-
-def label_tpose(uv: np.ndarray, view: str = "front", tolerance: float = 0.06,
-                max_blobs: int = 11) -> tuple[np.ndarray, float] | None:
-    """Find a T-pose among blobs uv (N, 2) px.
-
-    Returns (index (8,) into uv per marker, normalised residual) or None when no subset of 8
-    blobs fits the template within ``tolerance`` (or N < 8 or N > max_blobs).
-    """
-    n = len(uv)
-    if n < N_MARKERS or n > max_blobs:
-        return None
-    right_is_left = view == "front"
-    best: tuple[np.ndarray, float] | None = None
-    for subset in itertools.combinations(range(n), N_MARKERS):
-        sub = np.asarray(subset)
-        idx = sub[_assign_layout(uv[sub], right_is_left)]
-        pts = uv[idx]
-        # sanity: wrists outside shoulders, knees below the upper group, ankles below knees
-        if not (pts[[L_KN, R_KN], 1].min() > pts[:4, 1].max() and pts[[L_AN, R_AN], 1].min() > pts[[L_KN, R_KN], 1].max()):
-            continue
-        # affine invariants of a T-pose: wrists and shoulders on one line, arm span ~4x shoulders
-        span = np.linalg.norm(pts[L_WR] - pts[R_WR])
-        ratio = span / max(float(np.linalg.norm(pts[L_SH] - pts[R_SH])), 1e-6)
-        if not 2.5 <= ratio <= 7.0:
-            continue
-        axis = (pts[L_WR] - pts[R_WR]) / max(span, 1e-6)
-        normal = np.array([-axis[1], axis[0]])
-        off = (pts[:4] - pts[R_WR]) @ normal
-        if np.abs(off).max() > 0.12 * span:
-            continue
-        r = _affine_residual(TPOSE_TEMPLATE, pts)
-        if r <= tolerance and (best is None or r < best[1]):
-            best = (idx, r)
-    return best
-
-
-def _min_cost_assignment(D: np.ndarray, gate: np.ndarray, C: np.ndarray | None = None) -> list[tuple[int, int]]:
-    """Pairs (track, blob) minimising the total cost C (T, N) (default D) among gated pairs
-    D (T, N) < gate (T,).
-
-    Tracks and blobs split into connected groups of gated pairs; groups up to 5 tracks are
-    solved exactly (all injective matchings maximising the number of pairs, then the sum of
-    distances); bigger groups greedily by distance.
-    """
-    ok = D < gate[:, None]
-    if C is not None:
-        D = C
-    pairs: list[tuple[int, int]] = []
-    T, N = D.shape
-    # fast path: a track with a single gated blob that no other track can reach
-    row = ok.sum(axis=1)
-    col = ok.sum(axis=0)
-    single = ok & (row[:, None] == 1) & (col[None, :] == 1)
-    ts, bs = np.nonzero(single)
-    pairs += list(zip(ts.tolist(), bs.tolist()))
-    seen_t = single.any(axis=1) | (row == 0)
-    if seen_t.all():
-        return pairs
-    for t0 in range(T):
-        if seen_t[t0]:
-            continue
-        # grow the connected component
-        ts, bs = {t0}, set()
-        frontier_t = [t0]
-        while frontier_t:
-            new_b = set()
-            for t in frontier_t:
-                new_b |= set(np.flatnonzero(ok[t]).tolist())
-            new_b -= bs
-            bs |= new_b
-            new_t = set()
-            for b in new_b:
-                new_t |= set(np.flatnonzero(ok[:, b]).tolist())
-            new_t -= ts
-            ts |= new_t
-            frontier_t = list(new_t)
-        for t in ts:
-            seen_t[t] = True
-        tl, bl = sorted(ts), sorted(bs)
-        if len(tl) == 1 and len(bl) == 1:
-            pairs.append((tl[0], bl[0]))
-            continue
-        if len(tl) <= 5 and len(bl) <= 7:
-            best_key, best = None, []
-            options = [[b for b in bl if ok[t, b]] + [None] for t in tl]
-            for combo in itertools.product(*options):
-                used = [b for b in combo if b is not None]
-                if len(used) != len(set(used)):
-                    continue
-                cost = sum(D[t, b] ** 2 for t, b in zip(tl, combo) if b is not None)
-                key = (-len(used), cost)
-                if best_key is None or key < best_key:
-                    best_key, best = key, [(t, b) for t, b in zip(tl, combo) if b is not None]
-            pairs += best
-        else:
-            sub = [(D[t, b], t, b) for t in tl for b in bl if ok[t, b]]
-            used_t, used_b = set(), set()
-            for _, t, b in sorted(sub):
-                if t not in used_t and b not in used_b:
-                    pairs.append((t, b))
-                    used_t.add(t)
-                    used_b.add(b)
-    return pairs
-
-
 class MarkerTracker:
     """Keeps the identities of the 8 markers across frames. Not thread-safe."""
 
@@ -245,12 +100,6 @@ class MarkerTracker:
         self.partners: list[set[int]] = [set() for _ in range(N_MARKERS)]  # merged with, this episode
         self.uncertain_events = 0
         self.unresolved = np.zeros(N_MARKERS, bool)  # merged with no visible separation this episode
-        self.body_h = 0.0  # shoulder-to-ankle height (px) at labelling time
-        self.reach_px = 0.0  # shoulder-to-wrist reach (px)
-        self.shin_px = 0.0  # knee-to-ankle length (px)
-        self._recover_key: tuple | None = None
-        self._recover_streak = 0
-        self.recovered = 0
         self._last_t: int | None = None
         self._frame = 0
         self._init_streak = 0
@@ -288,11 +137,6 @@ class MarkerTracker:
         self.certain[:] = True
         self.partners = [set() for _ in range(N_MARKERS)]
         self.unresolved[:] = False
-        self.body_h = float(pts[[L_AN, R_AN], 1].mean() - pts[[L_SH, R_SH], 1].mean())
-        arms = np.linalg.norm(pts[[L_WR, R_WR]] - pts[[L_SH, R_SH]], axis=1).max()
-        self.reach_px = max(float(arms), 0.40 * self.body_h)
-        self.shin_px = max(float(np.linalg.norm(pts[[L_KN, R_KN]] - pts[[L_AN, R_AN]], axis=1).max()), 0.3 * self.body_h)
-        self._recover_key, self._recover_streak = None, 0
         self.initialised = True
         self._init_streak, self._init_prev = 0, None
         log.info("labelled the 8 markers from a T-pose (%s view, residual %.3f)", self.view, found[1])
@@ -506,72 +350,6 @@ class MarkerTracker:
         unsure = np.flatnonzero(~self.certain)
         if len(unsure) == 1 and len(clean) == N_MARKERS and len(set(clean.values())) == N_MARKERS:
             self.certain[unsure[0]] = True
-        self._recover(uv, assigned, clean)
-
-    def _violations(self, pos: dict[int, np.ndarray]) -> int:
-        """Body-plausibility violations of a labelling pos {marker: (2,) px} (a standing body
-        seen from roughly horizontal cameras): legs clearly crossed over relative to the
-        shoulder axis, a wrist out of its shoulder's reach, a shin too long, a knee or ankle
-        at shoulder height."""
-        bad = 0
-        sh_l, sh_r = pos.get(L_SH), pos.get(R_SH)
-        h = self.body_h
-        if sh_l is not None and sh_r is not None:
-            s = sh_l - sh_r
-            w = float(np.linalg.norm(s))
-            if w > 4.0:
-                a = s / w
-                for lm, rm in ((L_KN, R_KN), (L_AN, R_AN)):
-                    if lm in pos and rm in pos and (pos[lm] - pos[rm]) @ a < -1.0 * w:
-                        bad += 1
-            top = 0.5 * (sh_l[1] + sh_r[1])
-            for m in (L_KN, R_KN, L_AN, R_AN):
-                if m in pos and pos[m][1] < top + 0.25 * h:
-                    bad += 1
-        for sh, wr in ((L_SH, L_WR), (R_SH, R_WR)):
-            if sh in pos and wr in pos and np.linalg.norm(pos[wr] - pos[sh]) > 1.2 * self.reach_px:
-                bad += 1
-        for kn, an in ((L_KN, L_AN), (R_KN, R_AN)):
-            if kn in pos and an in pos and np.linalg.norm(pos[kn] - pos[an]) > 1.25 * self.shin_px:
-                bad += 1
-        return bad
-
-    def _recover(self, uv: np.ndarray, assigned: dict[int, int], clean: dict[int, int]) -> None:
-        """Give uncertain tracks their identities back when every marker is in view, the
-        uncertain ones on separate blobs, and exactly one way of labelling those blobs is
-        plausible (``_violations``) for ``recover_frames`` frames in a row."""
-        cfg = self.cfg
-        unsure = [m for m in range(N_MARKERS) if not self.certain[m]]
-        ok = (0 < len(unsure) <= 4 and self.body_h > 0 and len(assigned) == N_MARKERS
-              and all(m in clean for m in unsure) and len({clean[m] for m in unsure}) == len(unsure))
-        if not ok:
-            self._recover_key, self._recover_streak = None, 0
-            return
-        fixed = {m: uv[b] for m, b in assigned.items() if self.certain[m]}
-        plausible = []
-        for perm in itertools.permutations(unsure):
-            pos = dict(fixed)
-            pos.update({lab: uv[clean[m]] for m, lab in zip(unsure, perm)})
-            if self._violations(pos) == 0:
-                plausible.append(perm)
-                if len(plausible) > 1:
-                    break
-        if len(plausible) != 1:
-            self._recover_key, self._recover_streak = None, 0
-            return
-        key = (tuple(unsure), plausible[0])
-        self._recover_streak = self._recover_streak + 1 if key == self._recover_key else 1
-        self._recover_key = key
-        if self._recover_streak < cfg.recover_frames:
-            return
-        order = list(range(N_MARKERS))
-        for m, lab in zip(unsure, plausible[0]):
-            order[lab] = m
-        for name in ("pos", "vel", "area", "missing", "stale"):
-            setattr(self, name, getattr(self, name)[order].copy())
-        self.certain[list(plausible[0])] = True
-        self.recovered += 1
-        self._recover_key, self._recover_streak = None, 0
 
     def _init_index(self, uv: np.ndarray) -> np.ndarray:
         D = np.linalg.norm(self.pos[:, None, :] - uv[None, :, :], axis=2)

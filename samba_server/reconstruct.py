@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from samba_common.align import batch_frames
-from samba_common.body import fk_body, standard_pose
+from samba_common.body import fk, fk_body, standard_pose
 from samba_common.skeleton import BONE_TYPES, MARKER_JOINT, N_JOINTS, N_MARKERS
 
 from .db import MotionDB, load_default_db
@@ -75,13 +75,15 @@ class ReconstructConfig:
 class PoseResult:
     """One solved frame. joints: (13, 3) world metres (all NaN if unsolved); residual: rms marker
     error (m) over the observed markers; n_markers: markers used; iterations: LM iterations;
-    status: "solved", "bridged" or "unsolved"."""
+    status: "solved", "bridged" or "unsolved"; state: the solved torso rotation (3, 3), shoulder
+    midpoint (3,) and bone directions (11, 3), or None."""
 
     joints: np.ndarray
     residual: float
     n_markers: int
     iterations: int
     status: str
+    state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
 
 #: feature columns (of the 24 aligned marker coordinates) and pose-vector entries of each body
@@ -231,37 +233,71 @@ class Reconstructor:
         h.R, h.o, h.dirs, h.has_state, h.t_last = R, o, d, True, t
         if status == 0:
             h.t_seen = t
-        return PoseResult(q, float(resid), int(n_seen), int(iters), "solved" if status == 0 else "bridged")
+        return PoseResult(q, float(resid), int(n_seen), int(iters), "solved" if status == 0 else "bridged", (R, o, d))
+
+
+def _run(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, order: np.ndarray, progress) -> list[PoseResult]:
+    out: list[PoseResult] = [None] * len(t)  # type: ignore[list-item]
+    for i in order:
+        out[i] = rec.solve(markers[i], float(t[i]))
+        if progress is not None:
+            progress(1)
+    return out
+
+
+def _merge(a: PoseResult, b: PoseResult, lengths: np.ndarray) -> np.ndarray:
+    """Joints (13, 3) of the mean of two solved states (rotations by the chordal mean, directions
+    renormalised), so the merged pose keeps the subject's bone lengths exactly."""
+    Ra, oa, da = a.state  # type: ignore[misc]
+    Rb, ob, db = b.state  # type: ignore[misc]
+    U, _s, Vt = np.linalg.svd(Ra + Rb)
+    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    d = da + db
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d[2, 2] = 0.0  # the spine stays in the torso's x-y plane
+    d[2] /= np.linalg.norm(d[2])
+    return fk(0.5 * (oa + ob), R, d, lengths)
 
 
 def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = None,
                      config: ReconstructConfig | None = None, lengths: np.ndarray | None = None,
-                     progress=None) -> tuple[np.ndarray, dict]:
+                     progress=None, both_ways: bool = True) -> tuple[np.ndarray, dict]:
     """Reconstruct a whole take offline.
 
     markers: (F, 8, 3) world metres, NaN = unseen; t: (F,) seconds. lengths: subject bone lengths
     (8,), default: estimated from the whole take. progress: optional callable(n_frames_done).
+    both_ways: solve the take forwards (exactly as live) and backwards in time and merge the two
+    states per frame (the temporal model then sees the future too); False gives exactly the
+    live poses.
     Returns joints (F, 13, 3) (NaN frames where unsolved) and an info dict with per-frame
     ``residual`` (F,), ``n_markers`` (F,), ``iterations`` (F,), ``status`` (F,) and the
-    ``lengths`` (8,), ``ms_per_frame``.
+    ``lengths`` (8,), ``ms_per_frame`` (per solve).
     """
     db = db if db is not None else load_default_db()
     if lengths is None:
         lengths = estimate_lengths(markers, db.mean_lengths)
-    rec = Reconstructor(db, config, lengths)
+    lengths = np.asarray(lengths, float)
     F = len(t)
-    joints = np.full((F, N_JOINTS, 3), np.nan)
-    resid = np.full(F, np.nan)
-    nmark = np.zeros(F, np.int16)
-    iters = np.zeros(F, np.int16)
-    status = np.empty(F, dtype="<U8")
     t0 = time.perf_counter()
-    for i in range(F):
-        r = rec.solve(markers[i], float(t[i]))
-        joints[i], resid[i], nmark[i], iters[i], status[i] = r.joints, r.residual, r.n_markers, r.iterations, r.status
-        if progress is not None:
-            progress(1)
+    fwd = _run(Reconstructor(db, config, lengths), markers, t, np.arange(F), progress)
+    n_solves = F
+    results = fwd
+    joints = np.array([r.joints for r in fwd]).reshape(F, N_JOINTS, 3)
+    if both_ways and F > 1:
+        # time runs backwards: feed -t so the solver sees increasing times
+        bwd = _run(Reconstructor(db, config, lengths), markers, -np.asarray(t, float), np.arange(F)[::-1], progress)
+        n_solves += F
+        for i in range(F):
+            a, b = fwd[i], bwd[i]
+            if a.status != "unsolved" and b.status != "unsolved":
+                joints[i] = _merge(a, b, lengths)
+            elif b.status != "unsolved":
+                joints[i] = b.joints
+        results = [a if a.status != "unsolved" else b for a, b in zip(fwd, bwd)]
     elapsed = time.perf_counter() - t0
-    info = {"residual": resid, "n_markers": nmark, "iterations": iters, "status": status,
-            "lengths": np.asarray(lengths, float), "ms_per_frame": 1e3 * elapsed / max(F, 1)}
+    info = {"residual": np.array([r.residual for r in results]),
+            "n_markers": np.array([r.n_markers for r in results], np.int16),
+            "iterations": np.array([r.iterations for r in results], np.int16),
+            "status": np.array([r.status for r in results], dtype="<U8"),
+            "lengths": lengths, "ms_per_frame": 1e3 * elapsed / max(n_solves, 1)}
     return joints, info

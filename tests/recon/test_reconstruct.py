@@ -42,13 +42,21 @@ def test_missing_markers_short_gaps_bridged_long_gaps_nan(held_out):
     m[70:73] = np.nan          # 0.1 s: bridged by the temporal model
     m[100:125] = np.nan        # 0.83 s: too long, NaN after max_gap
     m[130, [0, 2, 4]] = np.nan  # a few markers missing: still solved
-    est, info = reconstruct_take(m, t, db)
+    # causal (as live): a gap is bridged for max_gap (0.3 s = 9 frames) after the last good frame
+    est, info = reconstruct_take(m, t, db, both_ways=False)
     assert len(est) == len(t)
     assert list(info["status"][70:73]) == ["bridged"] * 3
     assert np.all(np.isfinite(est[70:73])) and mpjpe(est[70:73], truth[70:73]) < 0.08
-    assert np.all(np.isnan(est[112:125])) and set(info["status"][112:125]) == {"unsolved"}
+    assert np.all(np.isfinite(est[100:108])) and set(info["status"][100:108]) == {"bridged"}
+    assert np.all(np.isnan(est[110:125])) and set(info["status"][110:125]) == {"unsolved"}
     assert info["status"][130] == "solved" and mpjpe(est[130:131], truth[130:131]) < 0.05
-    assert np.all(np.isfinite(est[128:]))  # recovers after the gap
+    assert np.all(np.isfinite(est[125:]))  # recovers after the gap
+    # offline, both ways: bridged from both ends, NaN only farther than max_gap from good frames
+    est2, info2 = reconstruct_take(m, t, db)
+    assert len(est2) == len(t)
+    assert np.all(np.isnan(est2[110:115])) and np.all(np.isfinite(est2[117:]))
+    both = np.all(np.isfinite(est), axis=(1, 2)) & np.all(np.isfinite(est2), axis=(1, 2))
+    assert mpjpe(est2[both], truth[both]) <= mpjpe(est[both], truth[both]) + 0.002
 
 
 def test_live_solver_estimates_the_body_from_the_standard_pose(held_out):
