@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib.resources import files
 from pathlib import Path
 
@@ -79,12 +79,32 @@ def builtin_mappings() -> list[BvhMapping]:
 
 
 @dataclass
-class _Joint:
+class BvhJoint:
+    """name; parent index (-1 for the root); offset (3,) in file units; channel names; first
+    column of its channels in the motion table."""
+
     name: str
     parent: int
-    offset: np.ndarray  # (3,)
-    channels: list[str]
-    chan_start: int
+    offset: np.ndarray
+    channels: list[str] = field(default_factory=list)
+    first: int = 0
+
+
+@dataclass
+class BvhDocument:
+    """A parsed BVH file: joints in file order (End Sites left out), motion (F, C) channel
+    values, frame_time in seconds."""
+
+    joints: list[BvhJoint]
+    motion: np.ndarray
+    frame_time: float
+
+    def index(self, name: str) -> int:
+        """Position of joint ``name`` in ``joints`` (KeyError if absent)."""
+        for k, j in enumerate(self.joints):
+            if j.name == name:
+                return k
+        raise KeyError(name)
 
 
 @dataclass
@@ -102,57 +122,74 @@ class BvhTake:
     source: str
 
 
-def _parse(text: str, path: str) -> tuple[list[_Joint], np.ndarray, float]:
+def parse_bvh_text(text: str, path: str = "<text>") -> BvhDocument:
+    """Parse BVH text (any channel order, position channels on any joint).
+
+    Raises BvhError naming ``path`` on malformed input."""
     tokens = text.split()
-    joints: list[_Joint] = []
-    stack: list[int] = []
-    i, n_chan = 0, 0
+    joints: list[BvhJoint] = []
+    stack: list[int | None] = []  # None marks an End Site block
     pending: int | None = None
+    n_chan = 0
     try:
-        if tokens[0] != "HIERARCHY":
+        if not tokens or tokens[0] != "HIERARCHY":
             raise BvhError(f"{path}: does not start with HIERARCHY")
         i = 1
         while tokens[i] != "MOTION":
             tok = tokens[i]
             if tok in ("ROOT", "JOINT"):
-                parent = stack[-1] if stack else -1
-                joints.append(_Joint(tokens[i + 1], parent, np.zeros(3), [], 0))
+                parent = next((k for k in reversed(stack) if k is not None), -1)
+                joints.append(BvhJoint(tokens[i + 1], parent, np.zeros(3)))
                 pending = len(joints) - 1
                 i += 2
             elif tok == "End":
-                joints.append(_Joint(f"__end_{len(joints)}", stack[-1], np.zeros(3), [], 0))
-                pending = len(joints) - 1
+                pending = None
                 i += 2
             elif tok == "{":
-                stack.append(pending)  # type: ignore[arg-type]
+                stack.append(pending)
                 i += 1
             elif tok == "}":
                 stack.pop()
                 i += 1
             elif tok == "OFFSET":
-                joints[stack[-1]].offset = np.array([float(x) for x in tokens[i + 1:i + 4]])
+                if stack[-1] is not None:
+                    joints[stack[-1]].offset = np.array([float(x) for x in tokens[i + 1:i + 4]])
                 i += 4
             elif tok == "CHANNELS":
                 k = int(tokens[i + 1])
-                jt = joints[stack[-1]]
+                jt = joints[stack[-1]]  # type: ignore[index]
                 jt.channels = tokens[i + 2:i + 2 + k]
-                jt.chan_start = n_chan
+                jt.first = n_chan
                 n_chan += k
                 i += 2 + k
             else:
                 raise BvhError(f"{path}: unexpected token {tok!r} in HIERARCHY")
+        if tokens[i + 1] != "Frames:" or tokens[i + 3] != "Frame" or tokens[i + 4] != "Time:":
+            raise BvhError(f"{path}: MOTION header is not 'Frames: N' / 'Frame Time: T'")
         n_frames = int(tokens[i + 2])
         frame_time = float(tokens[i + 5])
         values = np.array(tokens[i + 6:], dtype=np.float64)
-    except (IndexError, ValueError) as exc:
+    except (IndexError, ValueError, TypeError) as exc:
         if isinstance(exc, BvhError):
             raise
         raise BvhError(f"{path}: malformed BVH ({exc})") from None
-    if values.size < n_frames * n_chan or n_chan == 0:
+    if values.size != n_frames * n_chan or n_chan == 0:
         raise BvhError(f"{path}: MOTION has {values.size} values, expected {n_frames} x {n_chan}")
     if frame_time <= 0:
         raise BvhError(f"{path}: Frame Time must be positive")
-    return joints, values[: n_frames * n_chan].reshape(n_frames, n_chan), frame_time
+    return BvhDocument(joints, values.reshape(n_frames, n_chan), frame_time)
+
+
+def read_bvh(path: str | os.PathLike) -> BvhDocument:
+    """Read and parse a BVH file; BvhError names the file on any problem."""
+    p = Path(path)
+    try:
+        text = p.read_text(errors="replace")
+    except OSError as exc:
+        raise BvhError(f"{p}: cannot read ({exc.strerror})") from None
+    if not text.strip():
+        raise BvhError(f"{p}: empty file")
+    return parse_bvh_text(text, str(p))
 
 
 def _axis_rot(axis: str, deg: np.ndarray) -> np.ndarray:
@@ -170,8 +207,12 @@ def _axis_rot(axis: str, deg: np.ndarray) -> np.ndarray:
     return R
 
 
-def _fk(joints: list[_Joint], motion: np.ndarray, wanted: list[int]) -> np.ndarray:
-    """Global positions (F, len(wanted), 3) in BVH units for the joint indices ``wanted``."""
+def forward_kinematics(doc: BvhDocument, wanted: list[int] | None = None) -> np.ndarray:
+    """Global positions (F, len(wanted), 3) in file units of the joints ``wanted`` (indices into
+    doc.joints; default all). Rotations compose in channel order; only the needed chains are
+    computed."""
+    joints, motion = doc.joints, doc.motion
+    wanted = list(range(len(joints))) if wanted is None else wanted
     need: set[int] = set()
     for w in wanted:
         while w >= 0 and w not in need:
@@ -185,7 +226,7 @@ def _fk(joints: list[_Joint], motion: np.ndarray, wanted: list[int]) -> np.ndarr
         local_t = np.broadcast_to(jt.offset, (F, 3)).copy()
         R = np.broadcast_to(np.eye(3), (F, 3, 3)).copy()
         for c, ch in enumerate(jt.channels):
-            col = motion[:, jt.chan_start + c]
+            col = motion[:, jt.first + c]
             if ch.endswith("position"):
                 local_t[:, "XYZ".index(ch[0].upper())] += col
             elif ch.endswith("rotation"):
@@ -217,14 +258,8 @@ def load_bvh(path: str | os.PathLike, mapping: BvhMapping | str | os.PathLike | 
     The vertical position is left as in the file (see :func:`put_on_floor`).
     """
     p = Path(path)
-    try:
-        text = p.read_text(errors="replace")
-    except OSError as exc:
-        raise BvhError(f"{p}: cannot read ({exc.strerror})") from None
-    if not text.strip():
-        raise BvhError(f"{p}: empty file")
-    joints, motion, frame_time = _parse(text, str(p))
-    names = {j.name for j in joints}
+    doc = read_bvh(p)
+    names = {j.name for j in doc.joints}
     if mapping is None:
         candidates = builtin_mappings()
     elif isinstance(mapping, BvhMapping):
@@ -241,13 +276,12 @@ def load_bvh(path: str | os.PathLike, mapping: BvhMapping | str | os.PathLike | 
         tried = ", ".join(m.name for m in candidates)
         raise BvhError(f"{p}: no mapping fits its joint names (tried {tried}); "
                        f"write one like configs/bvh/cmu_classic.toml")
-    index = {j.name: k for k, j in enumerate(joints)}
-    pts = _fk(joints, motion, [index[n] for n in resolved])
+    pts = forward_kinematics(doc, [doc.index(n) for n in resolved])
     if chosen.up == "y":  # BVH (X right, Y up, Z front) -> Samba (X, -Z, Y)
         pts = np.stack([pts[..., 0], -pts[..., 2], pts[..., 1]], axis=-1)
     scale = unit_scale or chosen.unit_scale or _infer_scale(pts)
     pts = pts * scale
-    fps = 1.0 / frame_time
+    fps = 1.0 / doc.frame_time
     t = np.arange(pts.shape[0]) / fps
     log.debug("%s: %d frames at %.1f fps, mapping %s, %.4g m/unit", p, len(t), fps, chosen.name, scale)
     return BvhTake(pts, t, fps, chosen.name, str(p))

@@ -98,42 +98,41 @@ def _times(path, data, n_frames: int) -> np.ndarray:
     return t
 
 
+def _load_take(path, key: str, names_key: str, names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray, dict]:
+    data = _open_npz(path)
+    points = _points(path, data, key, len(names))
+    t = _times(path, data, points.shape[0])
+    _names(path, data, names_key, names)
+    return points, t, {k: v for k, v in data.items() if k not in (key, "t", names_key)}
+
+
+def _save_take(path, key: str, points: np.ndarray, t: np.ndarray, names_key: str, names: tuple[str, ...],
+               extra: dict[str, np.ndarray]) -> None:
+    points = np.asarray(points, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    if points.ndim != 3 or points.shape[1:] != (len(names), 3) or t.shape != (points.shape[0],):
+        raise ValueError(f"{key} {points.shape} / t {t.shape} do not match (F, {len(names)}, 3) / (F,)")
+    _atomic_savez(path, **{key: points, "t": t, names_key: np.array(names)}, **extra)
+
+
 def load_markers(path: str | os.PathLike) -> MarkerTake:
     """Read and validate a ``markers.npz``. Raises FormatError naming file and key."""
-    data = _open_npz(path)
-    markers = _points(path, data, "markers", len(MARKER_NAMES))
-    t = _times(path, data, markers.shape[0])
-    _names(path, data, "marker_names", MARKER_NAMES)
-    extra = {k: v for k, v in data.items() if k not in ("markers", "t", "marker_names")}
-    return MarkerTake(markers, t, extra)
+    return MarkerTake(*_load_take(path, "markers", "marker_names", MARKER_NAMES))
 
 
 def save_markers(path: str | os.PathLike, markers: np.ndarray, t: np.ndarray, **extra: np.ndarray) -> None:
-    """Write a ``markers.npz``. markers: (F, 8, 3) metres; t: (F,) seconds."""
-    markers = np.asarray(markers, dtype=np.float64)
-    t = np.asarray(t, dtype=np.float64)
-    if markers.ndim != 3 or markers.shape[1:] != (len(MARKER_NAMES), 3) or t.shape != (markers.shape[0],):
-        raise ValueError(f"markers {markers.shape} / t {t.shape} do not match (F, 8, 3) / (F,)")
-    _atomic_savez(path, markers=markers, t=t, marker_names=np.array(MARKER_NAMES), **extra)
+    """Write a ``markers.npz`` (atomically). markers: (F, 8, 3) metres; t: (F,) seconds."""
+    _save_take(path, "markers", markers, t, "marker_names", MARKER_NAMES, extra)
 
 
 def load_joints(path: str | os.PathLike) -> JointTake:
     """Read and validate a ``joints.npz``. Raises FormatError naming file and key."""
-    data = _open_npz(path)
-    joints = _points(path, data, "joints", len(JOINT_NAMES))
-    t = _times(path, data, joints.shape[0])
-    _names(path, data, "joint_names", JOINT_NAMES)
-    extra = {k: v for k, v in data.items() if k not in ("joints", "t", "joint_names")}
-    return JointTake(joints, t, extra)
+    return JointTake(*_load_take(path, "joints", "joint_names", JOINT_NAMES))
 
 
 def save_joints(path: str | os.PathLike, joints: np.ndarray, t: np.ndarray, **extra: np.ndarray) -> None:
-    """Write a ``joints.npz``. joints: (F, 13, 3) metres; t: (F,) seconds; extra keys allowed."""
-    joints = np.asarray(joints, dtype=np.float64)
-    t = np.asarray(t, dtype=np.float64)
-    if joints.ndim != 3 or joints.shape[1:] != (len(JOINT_NAMES), 3) or t.shape != (joints.shape[0],):
-        raise ValueError(f"joints {joints.shape} / t {t.shape} do not match (F, 13, 3) / (F,)")
-    _atomic_savez(path, joints=joints, t=t, joint_names=np.array(JOINT_NAMES), **extra)
+    """Write a ``joints.npz`` (atomically). joints: (F, 13, 3) metres; t: (F,) seconds; extra keys allowed."""
+    _save_take(path, "joints", joints, t, "joint_names", JOINT_NAMES, extra)
 
 
 def _atomic_savez(path: str | os.PathLike, **arrays: np.ndarray) -> None:

@@ -12,8 +12,9 @@ def _min_cost_assignment(D: np.ndarray, gate: np.ndarray, C: np.ndarray | None =
     D (T, N) < gate (T,).
 
     Tracks and blobs split into connected groups of gated pairs; groups up to 5 tracks are
-    solved exactly (all injective matchings maximising the number of pairs, then the sum of
-    distances); bigger groups greedily by distance.
+    solved exactly (the injective matching minimising the sum of squared costs, a track left
+    unassigned costing its squared gate, so a fresh track keeps its blob rather than giving it
+    up to a stale one); bigger groups greedily by cost.
     """
     ok = D < gate[:, None]
     if C is not None:
@@ -60,8 +61,8 @@ def _min_cost_assignment(D: np.ndarray, gate: np.ndarray, C: np.ndarray | None =
                 used = [b for b in combo if b is not None]
                 if len(used) != len(set(used)):
                     continue
-                cost = sum(D[t, b] ** 2 for t, b in zip(tl, combo) if b is not None)
-                key = (-len(used), cost)
+                # squared cost of each pair; a track left out costs its squared gate
+                key = sum(D[t, b] ** 2 if b is not None else gate[t] ** 2 for t, b in zip(tl, combo))
                 if best_key is None or key < best_key:
                     best_key, best = key, [(t, b) for t, b in zip(tl, combo) if b is not None]
             pairs += best

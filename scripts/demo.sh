@@ -5,13 +5,8 @@
 # Extra arguments go to samba-demo (e.g. --duration 30).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if [ -z "${VIRTUAL_ENV:-}" ]; then
-    [ -x .venv/bin/python ] || python3 -m venv .venv
-    # shellcheck disable=SC1091
-    source .venv/bin/activate
-fi
-python -m pip install -q --upgrade pip >/dev/null
-python -m pip install -q -e .
+# shellcheck source=scripts/_env.sh
+source scripts/_env.sh ""
 export OPENBLAS_NUM_THREADS=1
 echo "== samba-reconstruct on the sample take (the first run compiles the solver: about a minute)"
 samba-reconstruct sample --out sample_joints.npz

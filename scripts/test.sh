@@ -4,13 +4,8 @@
 # when running as root in CI, then runs the whole test suite. Extra arguments go to pytest.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-if [ -z "${VIRTUAL_ENV:-}" ]; then
-    [ -x .venv/bin/python ] || python3 -m venv .venv
-    # shellcheck disable=SC1091
-    source .venv/bin/activate
-fi
-python -m pip install -q --upgrade pip >/dev/null
-python -m pip install -q -e ".[dev]"
+# shellcheck source=scripts/_env.sh
+source scripts/_env.sh "[dev]"
 if [ "${CI:-}" = "true" ] && [ "$(id -u)" = 0 ] && ! command -v chromium >/dev/null 2>&1; then
     (apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null) \
         || echo "chromium could not be installed: the browser tests will be skipped" >&2
