@@ -28,8 +28,9 @@ from samba_common.skeleton import BONE_TYPES, JOINT_NAMES, MARKER_JOINT
 
 log = logging.getLogger(__name__)
 
-DB_VERSION = 1
+DB_VERSION = 2
 DEFAULT_DB_NAME = "default_db.npz"
+_KEYS = ("version", "dirs", "up", "clip", "clip_names", "clip_lengths", "fps")
 
 #: left/right joint permutation used to mirror poses
 _MIRROR = [JOINT_NAMES.index(n.replace("left", "@").replace("right", "left").replace("@", "right"))
@@ -41,12 +42,14 @@ class MotionDB:
     """Poses of the motion database.
 
     dirs: (N, 11, 3) float32 unit bone directions in the torso frame;
+    up: (N, 3) float32 world up (+Z) in the torso frame (how the pose stands to gravity);
     clip: (N,) int32 index into ``clip_names``; clip_names: (C,) str;
     clip_lengths: (C, 8) float32 bone lengths of each clip's body in metres (BONE_TYPES order);
     fps: rate the clips were resampled to.
     """
 
     dirs: np.ndarray
+    up: np.ndarray
     clip: np.ndarray
     clip_names: np.ndarray
     clip_lengths: np.ndarray
@@ -69,7 +72,7 @@ class MotionDB:
 
     def subset(self, keep: np.ndarray) -> "MotionDB":
         """A database with the poses where boolean ``keep`` (N,) is true (clips kept as they are)."""
-        return MotionDB(self.dirs[keep], self.clip[keep], self.clip_names, self.clip_lengths, self.fps)
+        return MotionDB(self.dirs[keep], self.up[keep], self.clip[keep], self.clip_names, self.clip_lengths, self.fps)
 
     def without(self, pattern: Callable[[str], bool]) -> "MotionDB":
         """Drop the poses of clips whose name satisfies ``pattern`` (e.g. leave-one-subject-out)."""
@@ -83,7 +86,8 @@ class MotionDB:
         tmp = p.with_name(p.name + ".part")
         with open(tmp, "wb") as fh:
             np.savez_compressed(
-                fh, version=np.int32(DB_VERSION), dirs=self.dirs.astype(np.float32), clip=self.clip.astype(np.int32),
+                fh, version=np.int32(DB_VERSION), dirs=self.dirs.astype(np.float32), up=self.up.astype(np.float32),
+                clip=self.clip.astype(np.int32),
                 clip_names=np.asarray(self.clip_names, dtype=str), clip_lengths=self.clip_lengths.astype(np.float32),
                 fps=np.float64(self.fps), bone_types=np.array(BONE_TYPES), joint_names=np.array(JOINT_NAMES),
                 joints_aligned=aligned, markers_aligned=aligned[:, list(MARKER_JOINT)])
@@ -95,16 +99,17 @@ class MotionDB:
         p = Path(path)
         try:
             with np.load(p, allow_pickle=False) as z:
-                data = {k: z[k] for k in ("version", "dirs", "clip", "clip_names", "clip_lengths", "fps") if k in z.files}
+                data = {k: z[k] for k in _KEYS if k in z.files}
         except FileNotFoundError:
             raise FormatError(p, None, "file not found") from None
         except (OSError, ValueError, EOFError) as exc:
             raise FormatError(p, None, f"not a readable .npz file ({exc})") from None
-        for key in ("version", "dirs", "clip", "clip_names", "clip_lengths", "fps"):
+        if "version" in data and int(data["version"]) != DB_VERSION:
+            raise FormatError(p, "version", f"database version {int(data['version'])}, this Samba reads {DB_VERSION} "
+                              "(rebuild it with samba-db build)")
+        for key in _KEYS:
             if key not in data:
                 raise FormatError(p, key, "missing key: not a Samba motion database (build one with samba-db build)")
-        if int(data["version"]) != DB_VERSION:
-            raise FormatError(p, "version", f"database version {int(data['version'])}, this Samba reads {DB_VERSION}")
         dirs, clip, lens = data["dirs"], data["clip"], data["clip_lengths"]
         if dirs.ndim != 3 or dirs.shape[1:] != (11, 3) or len(dirs) == 0:
             raise FormatError(p, "dirs", f"shape {dirs.shape}, expected (N>0, 11, 3)")
@@ -114,7 +119,9 @@ class MotionDB:
             raise FormatError(p, "clip_lengths", f"shape {lens.shape}, expected (C, 8) positive lengths")
         if not np.all(np.isfinite(dirs)):
             raise FormatError(p, "dirs", "contains NaN or infinite values")
-        return MotionDB(dirs.astype(np.float32), clip.astype(np.int32), data["clip_names"].astype(str),
+        if data["up"].shape != (len(dirs), 3) or not np.all(np.isfinite(data["up"])):
+            raise FormatError(p, "up", f"shape {data['up'].shape}, expected ({len(dirs)}, 3) finite")
+        return MotionDB(dirs.astype(np.float32), data["up"].astype(np.float32), clip.astype(np.int32), data["clip_names"].astype(str),
                         lens.astype(np.float32), float(data["fps"]))
 
 
@@ -162,9 +169,10 @@ def build_db(sources: Iterable[str | os.PathLike], mapping: BvhMapping | str | N
     since the last kept pose of its clip; mirror: also add left-right mirrored poses;
     base: an existing database to extend (its poses are kept).
     """
-    dirs_all, clip_all, names, lengths = [], [], [], []
+    dirs_all, up_all, clip_all, names, lengths = [], [], [], [], []
     if base is not None:
         dirs_all.append(base.dirs)
+        up_all.append(base.up)
         clip_all.append(base.clip)
         names.extend(str(n) for n in base.clip_names)
         lengths.extend(base.clip_lengths)
@@ -175,9 +183,10 @@ def build_db(sources: Iterable[str | os.PathLike], mapping: BvhMapping | str | N
         lens = np.median(bone_lengths(joints), axis=0)
         variants = [(Path(src).stem, joints)] + ([(Path(src).stem + "~mirror", _mirror(joints))] if mirror else [])
         for name, jts in variants:
-            _o, _R, dirs = decompose(jts)
+            _o, R, dirs = decompose(jts)
             keep = _prune(dirs, thr)
             dirs_all.append(dirs[keep].astype(np.float32))
+            up_all.append(R[keep, 2, :].astype(np.float32))  # world Z in torso coordinates: row 2 of R
             clip_all.append(np.full(len(keep), len(names), np.int32))
             names.append(name)
             lengths.append(lens.astype(np.float32))
@@ -185,5 +194,5 @@ def build_db(sources: Iterable[str | os.PathLike], mapping: BvhMapping | str | N
             progress(str(src))
     if not dirs_all:
         raise ValueError("no BVH files given")
-    return MotionDB(np.concatenate(dirs_all), np.concatenate(clip_all), np.array(names),
+    return MotionDB(np.concatenate(dirs_all), np.concatenate(up_all), np.concatenate(clip_all), np.array(names),
                     np.array(lengths, dtype=np.float32), float(fps))

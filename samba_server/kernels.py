@@ -8,7 +8,8 @@ The energy minimised by :func:`lm_solve` is
 
     |W (v(state) - mu)|^2 + sum_seen |(q_m - x_m) / sigma_m|^2 + [smooth] sum_j |(q_j - target_j) / sigma_s|^2
 
-where v is the 39-vector (vec(dirs), torso y and z axes in the marker body frame ``RA``), q the
+where v is the 42-vector (vec(dirs), torso y and z axes in the marker body frame ``RA``, world
+up in torso coordinates), q the
 world joints and target the constant-velocity prediction (second difference of the pose).
 The tangent step has 27 entries: rotation vector (3), translation (3), then two tangent angles
 per bone except the spine, which only leans in the torso's x-y plane (see :func:`param_col`).
@@ -27,7 +28,7 @@ from .kdtree import knn
 
 N_BONES = 11
 N_PARAMS = 27
-N_POSE = 39
+N_POSE = 42
 N_ANGLES = 17  # neck 2, spine 1, pelvis 2, 4 limbs x (ball 2 + hinge 1)
 
 # bone directions
@@ -228,7 +229,8 @@ def marker_axes(m):
 
 @njit(cache=True)
 def pose_vectors(pool, lengths, X, frame=True):
-    """X (P, 39): vec(dirs) and (when ``frame``) the torso y, z axes in each pose's marker body frame."""
+    """X[:, :39]: vec(dirs) and (when ``frame``) the torso y, z axes in each pose's marker body
+    frame, for pool poses (P, 11, 3); X is (P, 42), its last 3 columns are filled by the caller."""
     body = np.empty((13, 3))
     m = np.empty((8, 3))
     for p in range(pool.shape[0]):
@@ -255,9 +257,9 @@ def _frame_rows(m):
 
 @njit(cache=True)
 def gaussian_block(X, dims, floor2, weight, mu, W):
-    """Local PCA prior of the pose-vector entries ``dims``: writes their mean into mu (39,) and
-    the whitening block sqrt(weight) L^-1 into W (39, 39), where L L^T = C + floor2 I and C is
-    the covariance of the pooled poses X (P, 39) (the eigen-structure of C is the local PCA;
+    """Local PCA prior of the pose-vector entries ``dims``: writes their mean into mu (42,) and
+    the whitening block sqrt(weight) L^-1 into W (42, 42), where L L^T = C + floor2 I and C is
+    the covariance of the pooled poses X (P, 42) (the eigen-structure of C is the local PCA;
     floor2 keeps directions the pool does not span from being forbidden)."""
     P, d = X.shape[0], dims.shape[0]
     sub = np.empty((d, P))
@@ -370,7 +372,7 @@ def _world(R, o, dirs, lengths, q):
 @njit(cache=True)
 def _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r):
     _world(R, o, dirs, lengths, q)
-    v = np.empty(39)
+    v = np.empty(42)
     for b in range(11):
         for c in range(3):
             v[3 * b + c] = dirs[b, c] - mu[3 * b + c]
@@ -378,8 +380,9 @@ def _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, targe
     for c in range(3):
         v[33 + c] = M[c, 1] - mu[33 + c]
         v[36 + c] = M[c, 2] - mu[36 + c]
-    r[:39] = np.dot(W, v)
-    k = 39
+        v[39 + c] = R[2, c] - mu[39 + c]  # world up in torso coordinates: R^T z
+    r[:42] = np.dot(W, v)
+    k = 42
     for i in range(8):
         if seen[i]:
             for c in range(3):
@@ -409,7 +412,7 @@ def _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm
             Jq[j, i, 1] = R[i, 0] * b2 - R[i, 2] * b0
             Jq[j, i, 2] = -R[i, 0] * b1 + R[i, 1] * b0
             Jq[j, i, 3 + i] = 1.0
-    Jm[:39] = 0.0
+    Jm[:42] = 0.0
     for b in range(11):
         L = lengths[BONE_LENGTH[b]]
         for kk in range(2):
@@ -426,16 +429,19 @@ def _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm
                     Jq[j, 0, col] = g * w0
                     Jq[j, 1, col] = g * w1
                     Jq[j, 2, col] = g * w2
-            for r in range(39):  # prior: W @ (tangent in the rows of bone b)
+            for r in range(42):  # prior: W @ (tangent in the rows of bone b)
                 Jm[r, col] = W[r, 3 * b] * t0 + W[r, 3 * b + 1] * t1 + W[r, 3 * b + 2] * t2
     M = np.dot(RA.T, R)
-    for r in range(39):  # prior: torso y, z axes in the marker frame
+    u0, u1, u2 = R[2, 0], R[2, 1], R[2, 2]  # world up in torso coordinates
+    for r in range(42):  # prior: torso y, z axes in the marker frame; world up (u x e_k)
         wy0, wy1, wy2 = W[r, 33], W[r, 34], W[r, 35]
         wz0, wz1, wz2 = W[r, 36], W[r, 37], W[r, 38]
-        Jm[r, 0] = wy0 * M[0, 2] + wy1 * M[1, 2] + wy2 * M[2, 2] - (wz0 * M[0, 1] + wz1 * M[1, 1] + wz2 * M[2, 1])
-        Jm[r, 1] = wz0 * M[0, 0] + wz1 * M[1, 0] + wz2 * M[2, 0]
-        Jm[r, 2] = -(wy0 * M[0, 0] + wy1 * M[1, 0] + wy2 * M[2, 0])
-    k = 39
+        wu0, wu1, wu2 = W[r, 39], W[r, 40], W[r, 41]
+        Jm[r, 0] = (wy0 * M[0, 2] + wy1 * M[1, 2] + wy2 * M[2, 2] - (wz0 * M[0, 1] + wz1 * M[1, 1] + wz2 * M[2, 1])
+                    + wu1 * u2 - wu2 * u1)
+        Jm[r, 1] = wz0 * M[0, 0] + wz1 * M[1, 0] + wz2 * M[2, 0] - wu0 * u2 + wu2 * u0
+        Jm[r, 2] = -(wy0 * M[0, 0] + wy1 * M[1, 0] + wy2 * M[2, 0]) + wu0 * u1 - wu1 * u0
+    k = 42
     inv_m = 1.0 / sigma_m
     for i in range(8):
         if seen[i]:
@@ -485,7 +491,7 @@ def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
     for i in range(8):
         if seen[i]:
             n_seen += 1
-    n_res = 39 + 3 * n_seen + (39 if smooth else 0)
+    n_res = 42 + 3 * n_seen + (39 if smooth else 0)
     r = np.empty(n_res)
     r_new = np.empty(n_res)
     q = np.empty((13, 3))
@@ -534,17 +540,18 @@ def energy(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, s
     for i in range(8):
         if seen[i]:
             n_seen += 1
-    r = np.empty(39 + 3 * n_seen + (39 if smooth else 0))
+    r = np.empty(42 + 3 * n_seen + (39 if smooth else 0))
     q = np.empty((13, 3))
     return _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
 
 
 @njit(cache=True)
-def solve_frame(db_dirs, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, R_nn, RA, origin,
+def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, R_nn, RA, origin,
                 obs, seen, sigma_m, smooth, target, sigma_s, has_prev, R0, o0, d0, Gm, max_iter, tol):
     """One frame after the neighbour search, in one compiled call.
 
-    nbrs: (P, K) neighbour indices per body part; dims: (P, 39) pose-vector entries of each part
+    db_dirs: (M, 11, 3) database directions; db_up: (M, 3) world up in each pose's torso frame;
+    nbrs: (P, K) neighbour indices per body part; dims: (P, 42) pose-vector entries of each part
     (first n_dims[p] valid); the last part is the trunk (or the whole body when P == 1), parts 0
     and 1 the left and right arm. R_nn: (3, 3) marker axes in torso coordinates of the trunk's
     nearest pose; RA, origin: the observation's marker frame (world); obs (8, 3), seen (8,):
@@ -554,10 +561,10 @@ def solve_frame(db_dirs, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weig
     P, K = nbrs.shape
     N = cos_a.shape[0]
     n_pool = K * (N + 1)
-    mu = np.zeros(39)
-    W = np.zeros((39, 39))
+    mu = np.zeros(42)
+    W = np.zeros((42, 42))
     pools = np.empty((P, n_pool, 11, 3))
-    X = np.empty((n_pool, 39))
+    X = np.empty((n_pool, 42))
     for part in range(P):
         arm = P == 3 and part < 2
         if arm:
@@ -567,6 +574,9 @@ def solve_frame(db_dirs, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weig
         else:
             pseudo_pool(db_dirs, nbrs[part], cos_a, sin_a, pools[part], True, 0, 4)
         pose_vectors(pools[part], lengths, X, not arm)
+        for p in range(n_pool):  # pseudo-poses keep their neighbour's orientation to gravity
+            for c in range(3):
+                X[p, 39 + c] = db_up[nbrs[part, p // (N + 1)], c]
         gaussian_block(X, dims[part, :n_dims[part]], floor2, weight, mu, W)
     pool = pools[P - 1].copy()
     if P == 3:  # the arms of the start come from their own pools
@@ -619,7 +629,7 @@ def _partial_knn(features, cols, n_cols, feature, k):
 
 @njit(cache=True)
 def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, features, feat_cols, n_cols,
-          R_A_db, db_dirs, k, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, sigma_m, accel, smooth_floor,
+          up_weight, R_A_db, db_dirs, db_up, k, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, sigma_m, accel, smooth_floor,
           min_markers,
           Gm, max_iter, tol):
     """The whole per-frame solve in one compiled call.
@@ -627,7 +637,8 @@ def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, f
     markers: (8, 3) world metres, NaN rows unseen. History: n_hist (0-2) previous poses q1 (last),
     q2 (13, 3); has_pred: whether they are recent enough to predict from; has_state/R0/o0/d0: the
     last solved state; dt: seconds since the last pose. trees: per body part, the KD-tree arrays
-    (see :mod:`samba_server.kdtree`) over ``features`` (M, 24) columns feat_cols[p, :n_cols[p]].
+    (see :mod:`samba_server.kdtree`) over ``features`` (M, 27) columns feat_cols[p, :n_cols[p]]
+    (24 aligned marker coordinates, then world up in the marker frame times ``up_weight``).
     Returns (status, q (13, 3), R, o, dirs, iterations, rms marker residual, markers seen) with
     status 0 = solved, 1 = bridged (too few markers, temporal model), 2 = unsolved.
     """
@@ -657,11 +668,13 @@ def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, f
         return 2, q, R0, o0, d0, 0, np.nan, n_seen
     RA = marker_axes(filled)
     origin = 0.5 * (filled[0] + filled[1])
-    feature = np.empty(24)
+    feature = np.empty(27)
     for i in range(8):
         for c in range(3):
             feature[3 * i + c] = ((filled[i, 0] - origin[0]) * RA[0, c] + (filled[i, 1] - origin[1]) * RA[1, c]
                                   + (filled[i, 2] - origin[2]) * RA[2, c])
+    for c in range(3):
+        feature[24 + c] = up_weight * RA[2, c]
     P = len(trees)
     nbrs = np.empty((P, k), dtype=np.int64)
     for part in range(P):
@@ -684,7 +697,7 @@ def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, f
     if has_state and n_hist == 2:  # the shoulder midpoint moves on at constant velocity
         o_start += 0.5 * (q1[LS] + q1[RS] - q2[LS] - q2[RS])
     sigma_s = math.sqrt((accel * dt * dt) ** 2 + smooth_floor ** 2)
-    R, o, d, q, it = solve_frame(db_dirs, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weight,
+    R, o, d, q, it = solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weight,
                                  R_A_db[nbrs[P - 1, 0]], RA, origin, obs, seen, sigma_m, smooth, target, sigma_s,
                                  has_state and has_pred, R0, o_start, d0, Gm, max_iter, tol)
     acc = 0.0

@@ -87,16 +87,19 @@ class PoseResult:
 
 
 #: feature columns (of the 24 aligned marker coordinates) and pose-vector entries of each body
-#: part: left arm (left wrist), right arm (right wrist), trunk and legs (knees, ankles)
-PART_FEATURES = (np.r_[6:9], np.r_[9:12], np.r_[12:24])
-PART_DIMS = (np.r_[9:12, 15:18], np.r_[12:15, 18:21], np.r_[0:9, 21:39])
-WHOLE = (np.r_[0:24], np.r_[0:39])
+#: part: left arm (left wrist), right arm (right wrist), trunk and legs (knees, ankles, gravity)
+PART_FEATURES = (np.r_[6:9], np.r_[9:12], np.r_[12:27])
+PART_DIMS = (np.r_[9:12, 15:18], np.r_[12:15, 18:21], np.r_[0:9, 21:42])
+WHOLE = (np.r_[0:27], np.r_[0:42])
+#: metres of marker distance that one unit of difference in the direction of gravity counts for
+UP_WEIGHT = 1.0
 
 
 class PoseIndex:
     """KD-trees over the database poses re-posed with one subject's bone lengths.
 
-    features: (N, 24) aligned markers (metres, marker body frame); R_A: (N, 3, 3) marker-frame
+    features: (N, 27) aligned markers (metres, marker body frame) and world up in that frame
+    times UP_WEIGHT (so the trunk search also matches the orientation to gravity); R_A: (N, 3, 3) marker-frame
     axes in torso coordinates, to carry a neighbour's torso orientation into the world.
     One tree over the whole feature and one per body part (:data:`PART_FEATURES`).
     """
@@ -105,7 +108,9 @@ class PoseIndex:
         body = fk_body(db.dirs.astype(float), lengths)
         markers = body[:, list(MARKER_JOINT)]
         origin, R_A = batch_frames(markers)
-        self.features = np.einsum("fpi,fij->fpj", markers - origin[:, None], R_A).reshape(len(db), -1)
+        aligned = np.einsum("fpi,fij->fpj", markers - origin[:, None], R_A).reshape(len(db), -1)
+        up = np.einsum("fij,fi->fj", R_A, db.up.astype(float))  # world up in the marker frame
+        self.features = np.ascontiguousarray(np.concatenate([aligned, UP_WEIGHT * up], axis=1))
         self.R_A = np.ascontiguousarray(R_A)
         self._trees: dict[bytes, KDTree] = {}
 
@@ -118,7 +123,7 @@ class PoseIndex:
 
 
 def _padded(dims: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """Part dims as a (P, 39) int64 array padded with zeros, and their counts (P,)."""
+    """Part dims as a (P, 42) int64 array padded with zeros, and their counts (P,)."""
     out = np.zeros((len(dims), kernels.N_POSE), np.int64)
     for i, d in enumerate(dims):
         out[i, :len(d)] = d
@@ -224,7 +229,8 @@ class Reconstructor:
         dims, n_dims = self._dims[cfg.parts]
         status, q, R, o, d, iters, resid, n_seen = kernels.frame(
             markers, has_pred, h.n, h.q1, h.q2, h.has_state, h.R, h.o, h.dirs, t - h.t_last if h.n else 0.0,
-            trees, self.index.features, feat_cols, n_cols, self.index.R_A, self.db.dirs, min(cfg.k, len(self.db)),
+            trees, self.index.features, feat_cols, n_cols, UP_WEIGHT, self.index.R_A, self.db.dirs, self.db.up,
+            min(cfg.k, len(self.db)),
             dims, n_dims, self._cos, self._sin, self.lengths, self._floor2, cfg.prior_weight, cfg.sigma_marker,
             cfg.accel, cfg.smooth_floor, cfg.min_markers, kernels.G, cfg.max_iter, cfg.tol)
         if status == 2:

@@ -27,8 +27,9 @@ def _run(take, cam, config=None, calibration=True):
 
 
 # (clip, start s, seconds): wash self (hands rub and cross), dance with folding arms,
-# crossover dribble (hands cross), a walk (legs cross in the oblique views)
-CLIPS = [("002_10", 0.0, 5.0), ("005_03", 0.0, 3.5), ("006_14", 0.0, 4.0), ("002_01", 0.0, 2.8)]
+# crossover dribble (hands cross), a walk (legs cross in the oblique views), bending over
+CLIPS = [("002_10", 0.0, 5.0), ("005_03", 0.0, 3.5), ("006_14", 0.0, 4.0), ("002_01", 0.0, 2.8),
+         ("002_06", 0.0, 4.0)]
 
 
 @pytest.mark.skipif(not BVH.exists(), reason="shared BVH clips not available")

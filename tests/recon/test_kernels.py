@@ -69,7 +69,7 @@ def test_lm_recovers_a_pose_from_its_markers():
     o = np.array([0.1, 0.2, 1.4])
     truth = fk(o, R, dirs, LENGTHS)
     obs = truth[list(kernels.MARKER_JOINTS)]
-    mu, W = np.zeros(39), np.eye(39) * 0.01
+    mu, W = np.zeros(kernels.N_POSE), np.eye(kernels.N_POSE) * 0.01
     mu[:33] = dirs.reshape(-1)
     start = dirs + rng.normal(0, 0.05, dirs.shape)
     start /= np.linalg.norm(start, axis=1, keepdims=True)
