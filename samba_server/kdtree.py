@@ -4,7 +4,8 @@ scipy's ``cKDTree.query`` costs about 40 µs per call in fixed overhead on our m
 than the whole per-frame budget allows for three searches; this tree answers a 3-D k=10 query
 in a few microseconds and can be called from inside other compiled code.
 
-The tree is a set of flat arrays (:class:`KDTree` holds them): ``perm`` orders the points so
+The points are first rotated onto their principal axes (``center``, ``rot``; distances are
+unchanged). The tree is a set of flat arrays (:class:`KDTree` holds them): ``perm`` orders the points so
 that every node covers ``perm[start[n]:end[n]]``; inner nodes split on ``dim[n]`` at ``val[n]``
 into ``left[n]`` and ``right[n]`` (-1 for leaves).
 """
@@ -16,7 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-LEAF_SIZE = 16
+#: fast-math flags for the compiled kernels: reassociation lets reductions vectorise; no
+#: "nnan"/"ninf", which would make NaN tests (missing markers) always false
+FAST = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+LEAF_SIZE = 32
 
 
 @dataclass
@@ -33,25 +38,34 @@ class KDTree:
     right: np.ndarray
     lo: np.ndarray
     hi: np.ndarray
+    center: np.ndarray
+    rot: np.ndarray
 
     @staticmethod
     def build(points: np.ndarray, leaf_size: int = LEAF_SIZE) -> "KDTree":
-        """Build over points (N, D) (split on the widest dimension at the median)."""
-        data = np.ascontiguousarray(points, dtype=np.float64)
-        if len(data) == 0:
+        """Build over points (N, D): rotated onto their principal axes (distances unchanged, but
+        the splits follow the data: about twice as fast on pose features), then split on the
+        widest dimension at the median."""
+        points = np.asarray(points, dtype=np.float64)
+        if len(points) == 0:
             raise ValueError("cannot build a KD-tree over no points")
-        return KDTree(data, *_build(data, leaf_size))
+        center = points.mean(axis=0)
+        _u, _s, vt = np.linalg.svd(points - center, full_matrices=False)
+        rot = np.ascontiguousarray(vt.T) if vt.shape[0] == points.shape[1] else np.eye(points.shape[1])
+        data = np.ascontiguousarray((points - center) @ rot)
+        return KDTree(data, *_build(data, leaf_size), center, rot)
 
     def arrays(self) -> tuple:
         """The tree as a tuple of arrays, the argument form of :func:`knn`."""
-        return (self.data, self.perm, self.start, self.end, self.dim, self.val, self.left, self.right, self.lo, self.hi)
+        return (self.data, self.perm, self.start, self.end, self.dim, self.val, self.left, self.right, self.lo, self.hi,
+                self.center, self.rot)
 
     def query(self, q: np.ndarray, k: int) -> np.ndarray:
         """Indices (min(k, N),) of the nearest points to q (D,), nearest first."""
         return knn(*self.arrays(), np.ascontiguousarray(q, dtype=np.float64), min(k, len(self.data)))
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _build(data, leaf_size):
     """Compiled tree construction: (perm, start, end, dim, val, left, right, lo, hi)."""
     n, D = data.shape
@@ -104,7 +118,7 @@ def _build(data, leaf_size):
             left[:count].copy(), right[:count].copy(), lo[:count].copy(), hi[:count].copy())
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _box_dist(lo, hi, n, q):
     s = 0.0
     for c in range(q.shape[0]):
@@ -117,12 +131,13 @@ def _box_dist(lo, hi, n, q):
     return s
 
 
-@njit(cache=True)
-def knn(data, perm, start, end, dim, val, left, right, lo, hi, q, k):
-    """k nearest neighbours of q (D,) in the tree; indices (k,) nearest first (compiled).
+@njit(cache=True, fastmath=FAST)
+def knn(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, q_raw, k):
+    """k nearest neighbours of q_raw (D,) in the tree; indices (k,) nearest first (compiled).
 
     Depth-first, nearer child first, pruning nodes whose bounding box is farther than the
     current k-th distance."""
+    q = np.dot(q_raw - center, rot)
     best_d = np.full(k, np.inf)
     best_i = np.full(k, -1, dtype=np.int64)
     stack = np.empty(128, dtype=np.int64)

@@ -24,6 +24,10 @@ import math
 import numpy as np
 from numba import njit
 
+#: fast-math flags for the compiled kernels: reassociation lets reductions vectorise; no
+#: "nnan"/"ninf", which would make NaN tests (missing markers) always false
+FAST = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
 from .kdtree import knn
 
 N_BONES = 11
@@ -59,7 +63,7 @@ def incidence() -> np.ndarray:
 G = incidence()
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def param_col(b: int, k: int) -> int:
     """Column of tangent angle k (0/1) of bone b in the 27-parameter step (-1: not a parameter)."""
     if b < SPINE:
@@ -69,12 +73,12 @@ def param_col(b: int, k: int) -> int:
     return 6 + 2 * b + k - 1
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _cross(a, b):
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _normalize(v):
     n = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
     if n < 1e-12:
@@ -82,7 +86,7 @@ def _normalize(v):
     return v / n
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _rot3cs(v0, v1, v2, a0, a1, a2, c, s):
     """Rodrigues rotation of (v0, v1, v2) about the unit axis (a0, a1, a2), given cos and sin."""
     d = (a0 * v0 + a1 * v1 + a2 * v2) * (1.0 - c)
@@ -91,7 +95,7 @@ def _rot3cs(v0, v1, v2, a0, a1, a2, c, s):
             v2 * c + (a0 * v1 - a1 * v0) * s + a2 * d)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _unit3(x, y, z):
     n = math.sqrt(x * x + y * y + z * z)
     if n < 1e-12:
@@ -99,7 +103,7 @@ def _unit3(x, y, z):
     return x / n, y / n, z / n
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _ball_axis(d0, d1, d2):
     """Tilt axis of a ball joint (thesis eq. 4.10: R1 = Z x X, X = shoulder line made orthogonal
     to the bone Z); the forward axis stands in when the bone lies along the shoulder line."""
@@ -110,7 +114,7 @@ def _ball_axis(d0, d1, d2):
     return _unit3(d1 * x2 - d2 * x1, d2 * x0 - d0 * x2, d0 * x1 - d1 * x0)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _ball(d, b, c1, s1, c2, s2):
     """Rotate bone b of d (11, 3) by a tilt (cos c1, sin s1) about its ball axis, then a turn
     (c2, s2) about the bone."""
@@ -120,7 +124,7 @@ def _ball(d, b, c1, s1, c2, s2):
     d[b, 0], d[b, 1], d[b, 2] = _rot3cs(v0, v1, v2, z0, z1, z2, c2, s2)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _trunk_noise(d, c, s):
     """Neck ball, spine lean and pelvis turn/tilt noise on directions d (11, 3), in place;
     c, s: (17,) cosines and sines of the noise angles."""
@@ -131,7 +135,7 @@ def _trunk_noise(d, c, s):
     d[PELVIS, 0], d[PELVIS, 1], d[PELVIS, 2] = _rot3cs(v0, v1, v2, 0.0, 0.0, 1.0, c[4], s[4])
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def pseudo_pool(db_dirs, nbr, cos_a, sin_a, out, trunk=True, limb_lo=0, limb_hi=4):
     """Fill out (K*(N+1), 11, 3) with each neighbour's directions followed by N pseudo-poses.
 
@@ -173,7 +177,7 @@ def pseudo_pool(db_dirs, nbr, cos_a, sin_a, out, trunk=True, limb_lo=0, limb_hi=
             p += 1
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def body_joints(dirs, lengths, out):
     """Torso-frame joints out (13, 3) of directions (11, 3) and lengths (8,)."""
     hs = 0.5 * lengths[0]
@@ -197,7 +201,7 @@ def body_joints(dirs, lengths, out):
         out[RA, c] = out[RK, c] + lengths[7] * dirs[RSH, c]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def marker_axes(m):
     """Marker body frame (3, 3) (columns x, y, z) of 8 markers (8, 3) in any coordinates:
     x = right->left shoulder, y = up from the ankle (else knee) midpoint, else world Z, else
@@ -227,7 +231,7 @@ def marker_axes(m):
     return A
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def pose_vectors(pool, lengths, X, frame=True):
     """X[:, :39]: vec(dirs) and (when ``frame``) the torso y, z axes in each pose's marker body
     frame, for pool poses (P, 11, 3); X is (P, 42), its last 3 columns are filled by the caller."""
@@ -247,7 +251,7 @@ def pose_vectors(pool, lengths, X, frame=True):
         X[p, 36], X[p, 37], X[p, 38] = z0, z1, z2
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _frame_rows(m):
     """Rows 1 and 2 of the marker axes matrix of markers m (8, 3) (see :func:`marker_axes`):
     the torso y and z axes expressed in the marker frame, when m is in torso coordinates."""
@@ -255,7 +259,7 @@ def _frame_rows(m):
     return A[1, 0], A[1, 1], A[1, 2], A[2, 0], A[2, 1], A[2, 2]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def gaussian_block(X, dims, floor2, weight, mu, W):
     """Local PCA prior of the pose-vector entries ``dims``: writes their mean into mu (42,) and
     the whitening block sqrt(weight) L^-1 into W (42, 42), where L L^T = C + floor2 I and C is
@@ -272,15 +276,8 @@ def gaussian_block(X, dims, floor2, weight, mu, W):
         mu[col] = m
         for p in range(P):
             sub[i, p] = X[p, col] - m
-    C = np.empty((d, d))
-    scale = 1.0 / max(P - 1, 1)
+    C = np.dot(sub, sub.T) / max(P - 1, 1)
     for i in range(d):
-        for j in range(i + 1):
-            acc = 0.0
-            for p in range(P):
-                acc += sub[i, p] * sub[j, p]
-            C[i, j] = acc * scale
-            C[j, i] = C[i, j]
         C[i, i] += floor2
     Lc = np.linalg.cholesky(C)
     # inverse of the lower-triangular factor by forward substitution
@@ -298,7 +295,7 @@ def gaussian_block(X, dims, floor2, weight, mu, W):
             W[dims[i], dims[j]] = Li[i, j] * sw
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def linear_start(pool, lengths, obs_torso, seen):
     """The thesis' start: directions (11, 3) blending the pool so its markers best match the
     observed markers ``obs_torso`` (8, 3) (torso coordinates of the reference pose; rows where
@@ -344,22 +341,24 @@ def linear_start(pool, lengths, obs_torso, seen):
     return d
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _tangents(dirs):
+    """Tangent bases (11, 2, 3) of unit directions (11, 3); the spine's first tangent is its lean."""
     T = np.empty((11, 2, 3))
     for b in range(11):
-        d = dirs[b]
+        d0, d1, d2 = dirs[b, 0], dirs[b, 1], dirs[b, 2]
         if b == SPINE:
-            e1 = _normalize(np.array([-d[1], d[0], 0.0]))  # z x d
-        else:
-            hlp = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-            e1 = _normalize(hlp - (hlp[0] * d[0] + hlp[1] * d[1] + hlp[2] * d[2]) * d)
-        T[b, 0] = e1
-        T[b, 1] = _cross(d, e1)
+            e0, e1, e2 = _unit3(-d1, d0, 0.0)  # z x d
+        elif abs(d0) < 0.9:  # helper axis x, made orthogonal to d
+            e0, e1, e2 = _unit3(1.0 - d0 * d0, -d0 * d1, -d0 * d2)
+        else:  # helper axis y
+            e0, e1, e2 = _unit3(-d1 * d0, 1.0 - d1 * d1, -d1 * d2)
+        T[b, 0, 0], T[b, 0, 1], T[b, 0, 2] = e0, e1, e2
+        T[b, 1, 0], T[b, 1, 1], T[b, 1, 2] = d1 * e2 - d2 * e1, d2 * e0 - d0 * e2, d0 * e1 - d1 * e0
     return T
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _world(R, o, dirs, lengths, q):
     body = np.empty((13, 3))
     body_joints(dirs, lengths, body)
@@ -369,14 +368,14 @@ def _world(R, o, dirs, lengths, q):
     return body
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r):
     _world(R, o, dirs, lengths, q)
     v = np.empty(42)
     for b in range(11):
         for c in range(3):
             v[3 * b + c] = dirs[b, c] - mu[3 * b + c]
-    M = np.dot(RA.T, R)
+    M = _mat3(RA.T, R)
     for c in range(3):
         v[33 + c] = M[c, 1] - mu[33 + c]
         v[36 + c] = M[c, 2] - mu[36 + c]
@@ -399,7 +398,7 @@ def _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, targe
     return cost
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm, Jq, body):
     """Fill Jm (n_res, 27) with the Jacobian of :func:`_residuals`; Jq (13, 3, 27) and body
     (13, 3) are work arrays."""
@@ -431,7 +430,7 @@ def _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm
                     Jq[j, 2, col] = g * w2
             for r in range(42):  # prior: W @ (tangent in the rows of bone b)
                 Jm[r, col] = W[r, 3 * b] * t0 + W[r, 3 * b + 1] * t1 + W[r, 3 * b + 2] * t2
-    M = np.dot(RA.T, R)
+    M = _mat3(RA.T, R)
     u0, u1, u2 = R[2, 0], R[2, 1], R[2, 2]  # world up in torso coordinates
     for r in range(42):  # prior: torso y, z axes in the marker frame; world up (u x e_k)
         wy0, wy1, wy2 = W[r, 33], W[r, 34], W[r, 35]
@@ -459,32 +458,82 @@ def _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm
                 k += 1
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
+def _mat3(A, B):
+    """3x3 product without a BLAS call."""
+    C = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+    return C
+
+
+@njit(cache=True, fastmath=FAST)
 def _expm(w):
+    """Rotation matrix of the rotation vector w (3,) (Rodrigues)."""
     th = math.sqrt(w[0] ** 2 + w[1] ** 2 + w[2] ** 2)
     E = np.eye(3)
     if th < 1e-12:
         return E
-    k = w / th
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return E + math.sin(th) * K + (1.0 - math.cos(th)) * np.dot(K, K)
+    k0, k1, k2 = w[0] / th, w[1] / th, w[2] / th
+    s, c1 = math.sin(th), 1.0 - math.cos(th)
+    E[0, 0] -= c1 * (k1 * k1 + k2 * k2)
+    E[1, 1] -= c1 * (k0 * k0 + k2 * k2)
+    E[2, 2] -= c1 * (k0 * k0 + k1 * k1)
+    E[0, 1], E[1, 0] = -s * k2 + c1 * k0 * k1, s * k2 + c1 * k0 * k1
+    E[0, 2], E[2, 0] = s * k1 + c1 * k0 * k2, -s * k1 + c1 * k0 * k2
+    E[1, 2], E[2, 1] = -s * k0 + c1 * k1 * k2, s * k0 + c1 * k1 * k2
+    return E
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _step(R, o, dirs, delta, T):
-    R2 = np.dot(R, _expm(delta[:3]))
+    """Apply a tangent step (27,) to (R, o, dirs)."""
+    R2 = _mat3(R, _expm(delta[:3]))
     o2 = o + delta[3:6]
     d2 = dirs.copy()
     for b in range(11):
         for kk in range(2):
             col = param_col(b, kk)
             if col >= 0:
-                d2[b] += delta[col] * T[b, kk]
-        d2[b] = _normalize(d2[b])
+                for c in range(3):
+                    d2[b, c] += delta[col] * T[b, kk, c]
+        d2[b, 0], d2[b, 1], d2[b, 2] = _unit3(d2[b, 0], d2[b, 1], d2[b, 2])
     return R2, o2, d2
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
+def _spd_solve(A, g, lam, out):
+    """Solve (A + lam diag(A) + 1e-9 lam I) x = -g for symmetric positive (semi)definite A (n, n)
+    by Cholesky, into out (n,). Returns False if the damped matrix is not positive definite."""
+    n = A.shape[0]
+    L = np.empty((n, n))
+    for j in range(n):
+        s = A[j, j] * (1.0 + lam) + 1e-9 * lam
+        for m in range(j):
+            s -= L[j, m] * L[j, m]
+        if s <= 0.0:
+            return False
+        L[j, j] = math.sqrt(s)
+        for i in range(j + 1, n):
+            s = A[i, j]
+            for m in range(j):
+                s -= L[i, m] * L[j, m]
+            L[i, j] = s / L[j, j]
+    for i in range(n):  # forward: L y = -g
+        s = -g[i]
+        for m in range(i):
+            s -= L[i, m] * out[m]
+        out[i] = s / L[i, i]
+    for i in range(n - 1, -1, -1):  # back: L^T x = y
+        s = out[i]
+        for m in range(i + 1, n):
+            s -= L[m, i] * out[m]
+        out[i] = s / L[i, i]
+    return True
+
+
+@njit(cache=True, fastmath=FAST)
 def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, Gm, max_iter, tol):
     """Levenberg-Marquardt from (R, o, dirs). Returns (R, o, dirs, q (13, 3), iterations, cost)."""
     n_seen = 0
@@ -499,6 +548,7 @@ def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
     Jm = np.empty((n_res, 27))
     Jq = np.empty((13, 3, 27))
     body = np.empty((13, 3))
+    delta = np.empty(27)
     cost = _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
     lam = 1e-3
     it = 0
@@ -510,10 +560,9 @@ def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
         g = np.dot(Jm.T, r)
         accepted = False
         while lam <= 1e9:
-            Ad = A.copy()
-            for i in range(27):
-                Ad[i, i] += lam * (A[i, i] + 1e-9)
-            delta = -np.linalg.solve(Ad, g)
+            if not _spd_solve(A, g, lam, delta):
+                lam *= 10.0
+                continue
             R2, o2, d2 = _step(R, o, dirs, delta, T)
             cost_new = _residuals(R2, o2, d2, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q_new, r_new)
             if cost_new <= cost:
@@ -533,7 +582,7 @@ def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
     return R, o, dirs, q, it, cost
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def energy(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s):
     """The energy of one state (for choosing between starts)."""
     n_seen = 0
@@ -545,7 +594,7 @@ def energy(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, s
     return _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, R_nn, RA, origin,
                 obs, seen, sigma_m, smooth, target, sigma_s, has_prev, R0, o0, d0, Gm, max_iter, tol):
     """One frame after the neighbour search, in one compiled call.
@@ -604,7 +653,7 @@ def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor
     return R, o, d, q, it
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def _partial_knn(features, cols, n_cols, feature, k):
     """Nearest poses on the finite entries of ``feature`` among columns cols[:n_cols] (brute force;
     used only when a marker is unseen and there is no prediction to fill it)."""
@@ -627,7 +676,7 @@ def _partial_knn(features, cols, n_cols, feature, k):
     return np.argsort(d)[:k]
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath=FAST)
 def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, features, feat_cols, n_cols,
           up_weight, R_A_db, db_dirs, db_up, k, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, sigma_m, accel, smooth_floor,
           min_markers,
@@ -686,7 +735,7 @@ def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, f
             ok = ok and np.isfinite(sub[i])
         if ok:
             tr = trees[part]
-            nbrs[part] = knn(tr[0], tr[1], tr[2], tr[3], tr[4], tr[5], tr[6], tr[7], tr[8], tr[9], sub, k)
+            nbrs[part] = knn(tr[0], tr[1], tr[2], tr[3], tr[4], tr[5], tr[6], tr[7], tr[8], tr[9], tr[10], tr[11], sub, k)
         else:
             nbrs[part] = _partial_knn(features, feat_cols[part], n_cols[part], feature, k)
     smooth = n_hist == 2 and dt > 0

@@ -181,6 +181,7 @@ class Reconstructor:
             raise ValueError(f"bone lengths must be 8 positive numbers, got {lengths}")
         self.lengths = lengths
         self.index = PoseIndex(self.db, lengths)
+        self._trees = tuple(self.index.tree(c).arrays() for c in (PART_FEATURES if self.config.parts else WHOLE[:1]))
 
     def warm_up(self) -> None:
         """Compile the solver now rather than on the first live frame (the very first run on a
@@ -223,8 +224,7 @@ class Reconstructor:
         if not has_pred and h.n:
             self.reset()
             h = self._hist
-        parts = PART_FEATURES if cfg.parts else WHOLE[:1]
-        trees = tuple(self.index.tree(c).arrays() for c in parts)
+        trees = self._trees
         feat_cols, n_cols = self._cols[cfg.parts]
         dims, n_dims = self._dims[cfg.parts]
         status, q, R, o, d, iters, resid, n_seen = kernels.frame(

@@ -113,3 +113,11 @@ def test_lost_marker_keeps_identity_through_short_gap() -> None:
         flags_wrist.append(int(p.flags[list(p.labels).index(2)]) if 2 in p.labels else 0)
     assert all(fl & FLAG_PREDICTED for fl in flags_wrist[20:25])
     assert all(fl & FLAG_TRACKED for fl in flags_wrist[26:])
+
+
+def test_shipped_config_matches_defaults() -> None:
+    """configs/mote.toml lists every setting with its default (and loads without error)."""
+    from samba_mote.pipeline import load_mote_config
+
+    path = Path(__file__).resolve().parents[2] / "configs" / "mote.toml"
+    assert load_mote_config(path) == MoteConfig()
