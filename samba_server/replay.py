@@ -151,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
             cfg = load_server_configs(args.config)
             from .server import ServerConfig
 
-            server = Server(rig, toml, make_reconstructor(args.db),
+            server = Server(rig, toml, make_reconstructor(args.db, cfg.reconstruct),
                             ServerConfig(**{**cfg.server.__dict__, "max_lag_ms": 0.0}), cfg.sync, cfg.triangulate,
                             cfg.swap)
             n = sum(1 for _ in TakeReader(args.take))

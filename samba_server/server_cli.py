@@ -20,6 +20,7 @@ from samba_common import zenoh_util as zk
 from samba_common.calib import CalibrationError, CameraRig
 from samba_common.config import ConfigError, from_dict, read_toml
 
+from .reconstruct import ReconstructConfig
 from .record import Recorder, RecorderError
 from .server import Server, ServerConfig
 from .swap import SwapConfig
@@ -37,6 +38,7 @@ class ServerConfigs:
     sync: SyncConfig
     triangulate: TriangulateConfig
     swap: SwapConfig
+    reconstruct: ReconstructConfig
 
 
 def default_config_path() -> Path:
@@ -55,6 +57,7 @@ def load_server_configs(path: str | os.PathLike | None = None, **sync_overrides)
         sync=from_dict(SyncConfig, sync, f"{p} [sync]"),
         triangulate=from_dict(TriangulateConfig, data.get("triangulate", {}), f"{p} [triangulate]"),
         swap=from_dict(SwapConfig, data.get("swap", {}), f"{p} [swap]"),
+        reconstruct=from_dict(ReconstructConfig, data.get("reconstruct", {}), f"{p} [reconstruct]"),
     )
 
 
@@ -70,8 +73,8 @@ def setup_logging(verbose: int) -> None:
         pass
 
 
-def make_reconstructor(db_path: str | None):
-    """A Reconstructor with the motion DB at ``db_path`` (or the shipped one)."""
+def make_reconstructor(db_path: str | None, config: ReconstructConfig | None = None):
+    """A Reconstructor with the motion DB at ``db_path`` (or the shipped one), compiled and ready."""
     from .reconstruct import Reconstructor
 
     db = None
@@ -79,7 +82,7 @@ def make_reconstructor(db_path: str | None):
         from .db import MotionDB
 
         db = MotionDB.load(db_path)
-    rec = Reconstructor(db=db)
+    rec = Reconstructor(db=db, config=config)
     rec.warm_up()  # compile before the first live frame
     return rec
 
@@ -93,7 +96,7 @@ def build_server(calibration: str | os.PathLike, configs: ServerConfigs, db: str
     if not live and server_cfg.max_lag_ms:
         server_cfg = ServerConfig(**{**server_cfg.__dict__, "max_lag_ms": 0.0})
     recorder = Recorder(record, metadata={"tool": "samba-server"}) if record else None
-    return Server(rig, calibration_toml=toml, reconstructor=make_reconstructor(db), config=server_cfg,
+    return Server(rig, calibration_toml=toml, reconstructor=make_reconstructor(db, configs.reconstruct), config=server_cfg,
                   sync_config=configs.sync, tri_config=configs.triangulate, swap_config=configs.swap,
                   recorder=recorder)
 
