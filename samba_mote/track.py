@@ -346,12 +346,10 @@ class MarkerTracker:
                           and np.linalg.norm(pred[k] - uv[b]) < gate[k] + gate[m]]
                 if others:
                     self._doubt(m)
-        # elimination: one uncertain track on a blob of its own, the seven others measured
+        # elimination: all eight measured as separate blobs and only one of them uncertain
         unsure = np.flatnonzero(~self.certain)
-        if len(unsure) == 1 and len(assigned) == N_MARKERS:
-            u = int(unsure[0])
-            if u in clean and sum(1 for b in assigned.values() if b == clean[u]) == 1:
-                self.certain[u] = True
+        if len(unsure) == 1 and len(clean) == N_MARKERS and len(set(clean.values())) == N_MARKERS:
+            self.certain[unsure[0]] = True
 
     def _init_index(self, uv: np.ndarray) -> np.ndarray:
         D = np.linalg.norm(self.pos[:, None, :] - uv[None, :, :], axis=2)

@@ -136,27 +136,45 @@ def _trunk_noise(d, c, s):
 
 
 @njit(cache=True, fastmath=FAST)
-def pseudo_pool(db_dirs, nbr, cos_a, sin_a, out, trunk=True, limb_lo=0, limb_hi=4):
+def _in_limbs(b, limb_lo, limb_hi):
+    for limb in range(limb_lo, limb_hi):
+        if LIMB_BONES[limb, 0] == b or LIMB_BONES[limb, 1] == b:
+            return True
+    return False
+
+
+@njit(cache=True, fastmath=FAST)
+def pseudo_pool(db_dirs, nbr, cos_a, sin_a, out, trunk=True, limb_lo=0, limb_hi=4, only_limbs=False):
     """Fill out (K*(N+1), 11, 3) with each neighbour's directions followed by N pseudo-poses.
 
     db_dirs: (M, 11, 3) float32 database; nbr: (K,) indices; cos_a, sin_a: (N, 17) cosines and
-    sines of the noise angles (a fixed bank, so the result is deterministic). Limb roots are 2-DOF balls carrying the lower bone; elbows
-    and knees are hinges about the limb-plane normal; neck and pelvis are balls, the spine leans
-    about the torso's forward axis, the pelvis also turns about the spine. Only the trunk (neck,
-    spine, pelvis) when ``trunk`` and limbs limb_lo..limb_hi-1 (0 left arm, 1 right arm, 2 left
-    leg, 3 right leg) are perturbed: a body part's prior needs only its own bones.
+    sines of the noise angles (a fixed bank, so the result is deterministic). Limb roots are 2-DOF
+    balls carrying the lower bone; elbows and knees are hinges about the limb-plane normal; neck
+    and pelvis are balls, the spine leans about the torso's forward axis, the pelvis also turns
+    about the spine. Only the trunk (neck, spine, pelvis) when ``trunk`` and limbs
+    limb_lo..limb_hi-1 (0 left arm, 1 right arm, 2 left leg, 3 right leg) are perturbed: a body
+    part's prior needs only its own bones. With ``only_limbs`` only those limbs' bones are written
+    (the other entries of ``out`` are left as they were).
     """
     K, N = nbr.shape[0], cos_a.shape[0]
     p = 0
     for i in range(K):
         for b in range(11):
+            if only_limbs and not _in_limbs(b, limb_lo, limb_hi):
+                continue
             for c in range(3):
                 out[p, b, c] = db_dirs[nbr[i], b, c]
         base = p
         p += 1
         for n in range(N):
             d = out[p]
-            d[:] = out[base]
+            if only_limbs:
+                for limb in range(limb_lo, limb_hi):
+                    for b in (LIMB_BONES[limb, 0], LIMB_BONES[limb, 1]):
+                        for c in range(3):
+                            d[b, c] = out[base, b, c]
+            else:
+                d[:] = out[base]
             c, s = cos_a[n], sin_a[n]
             if trunk:
                 _trunk_noise(d, c, s)
@@ -323,10 +341,16 @@ def linear_start(pool, lengths, obs_torso, seen):
                 b[r] = obs_torso[i, c]
                 r += 1
     AAt = np.dot(A, A.T)
-    lam = 1e-3 * np.trace(AAt) / max(3 * n_seen, 1) + 1e-12
+    tr = 0.0
+    for i in range(3 * n_seen):
+        tr += AAt[i, i]
+    lam = 1e-3 * tr / max(3 * n_seen, 1) + 1e-12
     for i in range(3 * n_seen):
         AAt[i, i] += lam
-    gamma = np.dot(A.T, np.linalg.solve(AAt, b))
+    x = np.empty(3 * n_seen)
+    if not _chol_solve(AAt, b, x):
+        x[:] = 0.0
+    gamma = np.dot(A.T, x)
     d = np.zeros((11, 3))
     for p in range(P):
         d += gamma[p] * pool[p]
@@ -503,25 +527,25 @@ def _step(R, o, dirs, delta, T):
 
 
 @njit(cache=True, fastmath=FAST)
-def _spd_solve(A, g, lam, out):
-    """Solve (A + lam diag(A) + 1e-9 lam I) x = -g for symmetric positive (semi)definite A (n, n)
-    by Cholesky, into out (n,). Returns False if the damped matrix is not positive definite."""
-    n = A.shape[0]
+def _chol_solve(M, rhs, out):
+    """Solve M x = rhs for symmetric positive definite M (n, n) by Cholesky, into out (n,).
+    Returns False (out undefined) when M is not positive definite."""
+    n = M.shape[0]
     L = np.empty((n, n))
     for j in range(n):
-        s = A[j, j] * (1.0 + lam) + 1e-9 * lam
+        s = M[j, j]
         for m in range(j):
             s -= L[j, m] * L[j, m]
         if s <= 0.0:
             return False
         L[j, j] = math.sqrt(s)
         for i in range(j + 1, n):
-            s = A[i, j]
+            s = M[i, j]
             for m in range(j):
                 s -= L[i, m] * L[j, m]
             L[i, j] = s / L[j, j]
-    for i in range(n):  # forward: L y = -g
-        s = -g[i]
+    for i in range(n):  # forward: L y = rhs
+        s = rhs[i]
         for m in range(i):
             s -= L[i, m] * out[m]
         out[i] = s / L[i, i]
@@ -549,6 +573,8 @@ def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
     Jq = np.empty((13, 3, 27))
     body = np.empty((13, 3))
     delta = np.empty(27)
+    Ad = np.empty((27, 27))
+    mg = np.empty(27)
     cost = _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
     lam = 1e-3
     it = 0
@@ -560,7 +586,12 @@ def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
         g = np.dot(Jm.T, r)
         accepted = False
         while lam <= 1e9:
-            if not _spd_solve(A, g, lam, delta):
+            for i in range(27):  # LM damping: (A + lam diag(A)) delta = -g
+                for j in range(27):
+                    Ad[i, j] = A[i, j]
+                Ad[i, i] += lam * (A[i, i] + 1e-9)
+                mg[i] = -g[i]
+            if not _chol_solve(Ad, mg, delta):
                 lam *= 10.0
                 continue
             R2, o2, d2 = _step(R, o, dirs, delta, T)
@@ -612,12 +643,12 @@ def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor
     n_pool = K * (N + 1)
     mu = np.zeros(42)
     W = np.zeros((42, 42))
-    pools = np.empty((P, n_pool, 11, 3))
+    pools = np.zeros((P, n_pool, 11, 3))
     X = np.empty((n_pool, 42))
     for part in range(P):
         arm = P == 3 and part < 2
         if arm:
-            pseudo_pool(db_dirs, nbrs[part], cos_a, sin_a, pools[part], False, part, part + 1)
+            pseudo_pool(db_dirs, nbrs[part], cos_a, sin_a, pools[part], False, part, part + 1, True)
         elif P == 3:
             pseudo_pool(db_dirs, nbrs[part], cos_a, sin_a, pools[part], True, 2, 4)
         else:
@@ -636,11 +667,13 @@ def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor
                 pool[p, b] = pools[1, p, b]
     # observation in the torso coordinates of the nearest pose: ((x - origin) @ RA) @ R_nn.T
     obs_torso = np.zeros((8, 3))
+    M = _mat3(RA, R_nn.T)  # torso axes of the nearest pose, in world coordinates
     for i in range(8):
         if seen[i]:
-            a = np.dot(obs[i] - origin, RA)
-            obs_torso[i] = np.dot(R_nn, a)
-    Rs = np.dot(RA, R_nn.T)
+            for c in range(3):
+                obs_torso[i, c] = ((obs[i, 0] - origin[0]) * M[0, c] + (obs[i, 1] - origin[1]) * M[1, c]
+                                   + (obs[i, 2] - origin[2]) * M[2, c])
+    Rs = M
     ds = linear_start(pool, lengths, obs_torso, seen)
     os_ = origin.copy()
     if has_prev:
