@@ -91,7 +91,7 @@ def main() -> int:
         f"- MPJPE, all 13 joints: **{100 * np.mean(all_err):.2f} cm** (target <= 1.5; thesis 1.7 on walking)",
         f"- MPJPE, 5 unobserved joints: **{100 * np.mean(unobs_err):.2f} cm** (target <= 2.5)",
         f"- bone length sigma over a take, worst bone, mean over takes: **{1000 * sig_a.max(axis=1).mean():.1f} mm** (target <= 5)",
-        f"- mean bone length error, mean over takes per bone (cm): "
+        "- mean bone length error, mean over takes per bone (cm): "
         + ", ".join(f"{n} {100 * v:.2f}" for n, v in zip(BONE_TYPES, me_a.mean(axis=0)))
         + f"; worst bone **{100 * me_a.mean(axis=0).max():.2f} cm** (target <= 1)",
         f"- solve time {np.mean(ms):.2f} ms/frame (K={args.k}, N={args.pseudo}; see speed.py for the one-core figure)",

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from samba_common.pose_wire import PoseError, decode_pose
-from samba_common.skeleton import JOINT_NAMES
 from samba_common.wire import PacketError, decode_packet
 
+from .export.csvfile import write_joints_csv
 from .record import CALIBRATION_TOPIC, EVENTS_TOPIC, POSE_TOPIC, TakeReader
 
 
@@ -116,22 +116,13 @@ def pose_arrays(s: TakeSummary) -> tuple[np.ndarray, np.ndarray, dict]:
                        "t_ns": np.array([p.t_ns for p in s.poses], dtype=np.int64)}
 
 
-def write_csv(path: str | Path, joints: np.ndarray, t: np.ndarray) -> None:
-    """One row per frame: t, then x, y, z of every joint (metres); empty cells when unsolved."""
-    cols = ["t"] + [f"{n}_{a}" for n in JOINT_NAMES for a in "xyz"]
-    with open(path, "w", encoding="utf-8") as fh:
-        fh.write(",".join(cols) + "\n")
-        for tk, jk in zip(t, joints):
-            vals = [f"{tk:.6f}"] + ["" if not np.isfinite(v) else f"{v:.6f}" for v in jk.reshape(-1)]
-            fh.write(",".join(vals) + "\n")
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="samba-inspect", description="Summarise a recorded take and export its poses.")
     ap.add_argument("take", help="take.mcap")
     ap.add_argument("--export", metavar="JOINTS.npz", help="write the recorded poses as joints.npz")
     ap.add_argument("--csv", metavar="OUT.csv", help="write the recorded poses as CSV")
-    ap.add_argument("--plot", metavar="OUT.png", help="plot the joints over time (needs samba_server.plots)")
+    ap.add_argument("--plot", metavar="OUT.png",
+                    help="plot marker visibility per mote, joint trajectories and latency over time")
     args = ap.parse_args(argv)
     try:
         s = summarize(args.take)
@@ -147,15 +138,12 @@ def main(argv: list[str] | None = None) -> int:
             save_joints(args.export, joints, t, **extra)
             print(f"wrote {args.export} ({len(t)} frames)")
         if args.csv:
-            write_csv(args.csv, joints, t)
+            write_joints_csv(args.csv, joints, t)
             print(f"wrote {args.csv} ({len(t)} frames)")
         if args.plot:
-            try:
-                from . import plots
-            except ImportError:
-                print("samba-inspect: --plot needs samba_server.plots, which is not installed", file=sys.stderr)
-                return 1
-            plots.plot_take(joints, t, args.plot)  # type: ignore[attr-defined]
+            from .plots import plot_take
+
+            plot_take(args.take, args.plot)  # all panels: visibility per mote, trajectories, latency
             print(f"wrote {args.plot}")
     except (OSError, ValueError) as exc:
         print(f"samba-inspect: {exc}", file=sys.stderr)

@@ -3,20 +3,19 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import logging
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 
 from samba_common.config import ConfigError, load_section
 from samba_common.formats import FormatError, load_markers, save_joints
 from samba_common.progress import Progress
-from samba_common.skeleton import BONE_TYPES, JOINT_NAMES
+from samba_common.skeleton import BONE_TYPES
 
 from .db import MotionDB, load_default_db, sample_path
+from .export.csvfile import write_joints_csv
 from .proportions import ProportionError
 from .reconstruct import ReconstructConfig, reconstruct_take
 
@@ -27,15 +26,6 @@ EXAMPLES = """examples:
   samba-reconstruct sample --out joints.npz        # the sample take shipped in the package
   samba-reconstruct markers.npz --out joints.npz --db my_db.npz --k 10 --pseudo 10 --csv joints.csv
 """
-
-
-def write_csv(path: str | Path, joints: np.ndarray, t: np.ndarray) -> None:
-    """One row per frame: t, then <joint>_x, _y, _z in metres (empty where unsolved)."""
-    with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["t"] + [f"{n}_{a}" for n in JOINT_NAMES for a in "xyz"])
-        for ti, row in zip(t, joints.reshape(len(t), -1)):
-            w.writerow([f"{ti:.6f}"] + ["" if not np.isfinite(v) else f"{v:.6f}" for v in row])
 
 
 def summary(info: dict, n_frames: int) -> str:
@@ -80,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
         save_joints(args.out, joints, take.t, residual=info["residual"], n_markers=info["n_markers"],
                     status=info["status"], bone_lengths=info["lengths"], bone_types=np.array(BONE_TYPES))
         if args.csv:
-            write_csv(args.csv, joints, take.t)
+            write_joints_csv(args.csv, joints, take.t)
     except (FormatError, ConfigError, ProportionError) as exc:
         print(f"samba-reconstruct: {exc}", file=sys.stderr)
         return 1

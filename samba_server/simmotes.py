@@ -19,7 +19,6 @@ import numpy as np
 
 from samba_common import zenoh_util as zk
 from samba_common.calib import CameraRig
-from samba_common.skeleton import N_MARKERS
 from samba_common.wire import FLAG_TRACKED, MarkerPacket, encode_packet
 
 log = logging.getLogger(__name__)

@@ -22,15 +22,20 @@ def csv_header() -> list[str]:
     return ["t"] + [f"{j}_{a}" for j in JOINT_NAMES for a in "xyz"]
 
 
-def write_csv(path: str | os.PathLike, take: ExportTake) -> int:
-    """Write the joints as CSV; returns the number of rows written (frames)."""
-    flat = take.joints.reshape(take.n_frames, -1)
+def write_joints_csv(path: str | os.PathLike, joints: np.ndarray, t: np.ndarray) -> int:
+    """Write joints (F, 13, 3) metres at times t (F,) s as CSV (atomically); returns the rows written."""
+    flat = np.asarray(joints).reshape(len(t), 3 * len(JOINT_NAMES))
     tmp = f"{os.fspath(path)}.part"
     with open(tmp, "w", encoding="ascii", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(csv_header())
-        for t, row in zip(take.t, flat):
-            w.writerow([f"{t:.6f}"] + ["" if not np.isfinite(v) else f"{v:.6f}" for v in row])
+        for ti, row in zip(t, flat):
+            w.writerow([f"{ti:.6f}"] + ["" if not np.isfinite(v) else f"{v:.6f}" for v in row])
     os.replace(tmp, path)
-    log.info("%s: %d rows", path, take.n_frames)
-    return take.n_frames
+    log.info("%s: %d rows", path, len(t))
+    return len(t)
+
+
+def write_csv(path: str | os.PathLike, take: ExportTake) -> int:
+    """Write a take's joints as CSV; returns the number of rows written (frames)."""
+    return write_joints_csv(path, take.joints, take.t)
