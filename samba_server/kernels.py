@@ -297,7 +297,12 @@ def gaussian_block(X, dims, floor2, weight, mu, W):
     C = np.dot(sub, sub.T) / max(P - 1, 1)
     for i in range(d):
         C[i, i] += floor2
-    Lc = np.linalg.cholesky(C)
+    Lc = np.empty((d, d))
+    if not _cholesky(C, Lc):  # cannot happen with floor2 > 0; keep a flat prior if it does
+        for i in range(d):
+            for j in range(d):
+                W[dims[i], dims[j]] = 0.0
+        return
     # inverse of the lower-triangular factor by forward substitution
     Li = np.zeros((d, d))
     for j in range(d):
@@ -527,11 +532,10 @@ def _step(R, o, dirs, delta, T):
 
 
 @njit(cache=True, fastmath=FAST)
-def _chol_solve(M, rhs, out):
-    """Solve M x = rhs for symmetric positive definite M (n, n) by Cholesky, into out (n,).
-    Returns False (out undefined) when M is not positive definite."""
+def _cholesky(M, L):
+    """Lower-triangular L (n, n) with L L^T = M for symmetric positive definite M; False when M
+    is not positive definite (L is then undefined)."""
     n = M.shape[0]
-    L = np.empty((n, n))
     for j in range(n):
         s = M[j, j]
         for m in range(j):
@@ -544,6 +548,19 @@ def _chol_solve(M, rhs, out):
             for m in range(j):
                 s -= L[i, m] * L[j, m]
             L[i, j] = s / L[j, j]
+        for i in range(j):
+            L[i, j] = 0.0
+    return True
+
+
+@njit(cache=True, fastmath=FAST)
+def _chol_solve(M, rhs, out):
+    """Solve M x = rhs for symmetric positive definite M (n, n) by Cholesky, into out (n,).
+    Returns False (out undefined) when M is not positive definite."""
+    n = M.shape[0]
+    L = np.empty((n, n))
+    if not _cholesky(M, L):
+        return False
     for i in range(n):  # forward: L y = rhs
         s = rhs[i]
         for m in range(i):

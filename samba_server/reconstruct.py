@@ -65,7 +65,7 @@ class ReconstructConfig:
     min_markers: int = 4
     max_gap: float = 0.3
     max_iter: int = 10
-    tol: float = 1e-3
+    tol: float = 1e-2
     body_frames: int = 30
     seed: int = 7
     parts: bool = True
