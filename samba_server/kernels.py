@@ -358,7 +358,10 @@ def linear_start(pool, lengths, obs_torso, seen):
     gamma = np.dot(A.T, x)
     d = np.zeros((11, 3))
     for p in range(P):
-        d += gamma[p] * pool[p]
+        gp = gamma[p]
+        for bone in range(11):
+            for c in range(3):
+                d[bone, c] += gp * pool[p, bone, c]
     for bone in range(11):
         n = math.sqrt(d[bone, 0] ** 2 + d[bone, 1] ** 2 + d[bone, 2] ** 2)
         if n > 1e-6:
@@ -678,10 +681,11 @@ def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor
     pool = pools[P - 1].copy()
     if P == 3:  # the arms of the start come from their own pools
         for p in range(n_pool):
-            for b in (LUA, LFA):
-                pool[p, b] = pools[0, p, b]
-            for b in (RUA, RFA):
-                pool[p, b] = pools[1, p, b]
+            for c in range(3):
+                pool[p, LUA, c] = pools[0, p, LUA, c]
+                pool[p, LFA, c] = pools[0, p, LFA, c]
+                pool[p, RUA, c] = pools[1, p, RUA, c]
+                pool[p, RFA, c] = pools[1, p, RFA, c]
     # observation in the torso coordinates of the nearest pose: ((x - origin) @ RA) @ R_nn.T
     obs_torso = np.zeros((8, 3))
     M = _mat3(RA, R_nn.T)  # torso axes of the nearest pose, in world coordinates
