@@ -65,7 +65,7 @@ class KDTree:
         return knn(*self.arrays(), np.ascontiguousarray(q, dtype=np.float64), min(k, len(self.data)))
 
 
-@njit(cache=True, fastmath=FAST)
+@njit(cache=True, fastmath=FAST, nogil=True)
 def _build(data, leaf_size):
     """Compiled tree construction: (perm, start, end, dim, val, left, right, lo, hi)."""
     n, D = data.shape

@@ -21,6 +21,7 @@ that starts every take) and keeps them fixed afterwards.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from dataclasses import dataclass, field
 
@@ -50,7 +51,7 @@ class ReconstructConfig:
     iteration cap and relative energy decrease that stops it; min_markers:
     fewer observed markers make a frame "bridged" by the temporal model; max_gap: longest bridge
     (s), beyond it frames are NaN; max_iter: LM iteration cap; body_frames: frames used to
-    estimate the body live; seed: pseudo-pose noise bank seed.
+    estimate the body live (see :meth:`Reconstructor._estimate_body`); seed: pseudo-pose noise bank seed.
     """
 
     k: int = 10
@@ -167,6 +168,7 @@ class Reconstructor:
         self._cols = {flag: _padded(PART_FEATURES if flag else WHOLE[:1]) for flag in (False, True)}
         self._estimating = lengths is None
         self._body_buffer: list[np.ndarray] = []
+        self._pending_body: tuple | None = None
         self.lengths: np.ndarray | None = None
         self.index: PoseIndex | None = None
         self._hist = _History()
@@ -179,9 +181,13 @@ class Reconstructor:
         lengths = np.asarray(lengths, dtype=float)
         if lengths.shape != (len(BONE_TYPES),) or not np.all(np.isfinite(lengths)) or np.any(lengths <= 0):
             raise ValueError(f"bone lengths must be 8 positive numbers, got {lengths}")
-        self.lengths = lengths
-        self.index = PoseIndex(self.db, lengths)
-        self._trees = tuple(self.index.tree(c).arrays() for c in (PART_FEATURES if self.config.parts else WHOLE[:1]))
+        self.lengths, self.index, self._trees = self._build_index(lengths)
+
+    def _build_index(self, lengths: np.ndarray) -> tuple[np.ndarray, PoseIndex, tuple]:
+        """The database re-posed with ``lengths`` and its KD-trees (lengths, index, tree arrays)."""
+        index = PoseIndex(self.db, lengths)
+        trees = tuple(index.tree(c).arrays() for c in (PART_FEATURES if self.config.parts else WHOLE[:1]))
+        return lengths, index, trees
 
     def warm_up(self) -> None:
         """Compile the solver now rather than on the first live frame (the very first run on a
@@ -201,18 +207,40 @@ class Reconstructor:
         """Solve one frame. markers: (8, 3) world metres, NaN rows = unseen; t: seconds."""
         markers = np.asarray(markers, dtype=float).reshape(N_MARKERS, 3)
         if self._estimating:
-            self._body_buffer.append(markers)
-            n = len(self._body_buffer)
-            if self.lengths is None or n == self.config.body_frames // 3 or n >= self.config.body_frames:
-                try:
-                    self.set_lengths(estimate_lengths(np.array(self._body_buffer), self.db.mean_lengths))
-                except ProportionError:
-                    pass
-            if n >= self.config.body_frames:
-                self._estimating, self._body_buffer = False, []
+            self._estimate_body(markers)
             if self.lengths is None:
                 return self._unsolved(int(np.all(np.isfinite(markers), axis=1).sum()))
         return self._solve(markers, float(t))
+
+    def _estimate_body(self, markers: np.ndarray) -> None:
+        """Live body estimate: from the first frame that shows enough of the body (built at once),
+        then from the first ``body_frames`` frames (the standard pose), re-posed in a background
+        thread and swapped in exactly ``body_frames`` frames later, so no frame waits for the
+        rebuild and a replay swaps at the same frame as the live run."""
+        n_cfg = self.config.body_frames
+        self._body_buffer.append(markers)
+        n = len(self._body_buffer)
+        if self.lengths is None:
+            try:
+                self.set_lengths(estimate_lengths(np.array(self._body_buffer), self.db.mean_lengths))
+            except ProportionError:
+                return
+            self._body_buffer = [markers]  # count the standard pose from the first usable frame
+        elif n == n_cfg and self._pending_body is None:
+            try:
+                lengths = estimate_lengths(np.array(self._body_buffer), self.db.mean_lengths)
+            except ProportionError:
+                return
+            box: dict = {}
+            worker = threading.Thread(target=lambda: box.update(built=self._build_index(lengths)), daemon=True,
+                                      name="samba-body")
+            worker.start()
+            self._pending_body = (worker, box)
+        elif n >= 2 * n_cfg and self._pending_body is not None:
+            worker, box = self._pending_body
+            worker.join()
+            self.lengths, self.index, self._trees = box["built"]
+            self._estimating, self._body_buffer, self._pending_body = False, [], None
 
     def _unsolved(self, n: int) -> PoseResult:
         return PoseResult(np.full((N_JOINTS, 3), np.nan), float("nan"), n, 0, "unsolved")
