@@ -153,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
 
             server = Server(rig, toml, make_reconstructor(args.db, cfg.reconstruct),
                             ServerConfig(**{**cfg.server.__dict__, "max_lag_ms": 0.0}), cfg.sync, cfg.triangulate,
-                            cfg.swap)
+                            cfg.swap, relabel_config=cfg.relabel)
             n = sum(1 for _ in TakeReader(args.take))
             with Progress(n, "samba-replay") as bar:
                 reader = replay_into(server, args.take, bar.update)

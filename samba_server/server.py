@@ -27,6 +27,7 @@ from samba_common.skeleton import N_JOINTS, N_MARKERS
 from samba_common.wire import PacketError, decode_packet
 
 from .record import Recorder
+from .relabel import GuidedLabeller, RelabelConfig
 from .swap import SwapConfig, repair_one_swap
 from .sync import FrameSync, SyncConfig, SyncPacket
 from .triangulate import TriangulateConfig, Triangulator
@@ -71,7 +72,7 @@ class Server:
     def __init__(self, rig: CameraRig, calibration_toml: bytes | None = None, reconstructor=None,
                  config: ServerConfig | None = None, sync_config: SyncConfig | None = None,
                  tri_config: TriangulateConfig | None = None, swap_config: SwapConfig | None = None,
-                 recorder: Recorder | None = None, publish: PublishFn | None = None,
+                 recorder: Recorder | None = None, relabel_config: RelabelConfig | None = None, publish: PublishFn | None = None,
                  clock: Callable[[], int] = time.time_ns):
         self.rig = rig
         self.calibration_toml = calibration_toml if calibration_toml is not None else rig.dumps().encode()
@@ -79,6 +80,7 @@ class Server:
         self.sync = FrameSync(sync_config)
         self.triangulator = Triangulator(rig, tri_config)
         self.swap_config = swap_config or SwapConfig()
+        self.labeller = GuidedLabeller(rig, relabel_config)
         self.reconstructor = reconstructor
         self.recorder = recorder
         self.publish = publish
@@ -202,12 +204,17 @@ class Server:
         frames = self.sync.push(SyncPacket(pkt.mote_id, pkt.seq, pkt.t_ns, t, pkt))
         return [self._frame(f) for f in frames]
 
-    def markers_for(self, frame) -> tuple[np.ndarray, int, bool]:
-        """Triangulated markers of a frame: ((8, 3) world m NaN = missing, marker mask, swap repaired)."""
+    def markers_for(self, frame, t: float) -> tuple[np.ndarray, int, bool]:
+        """Triangulated markers of a frame at t seconds: ((8, 3) world m NaN = missing, marker mask,
+        swap repaired). Blobs the motes left unlabelled get labels from the predicted pose."""
         C = len(self.rig.names)
         uv = np.full((C, N_MARKERS, 2), np.nan)
+        packets = [None] * C
         for mote_id, sp in frame.packets.items():
-            uv[self._cam_index[mote_id]] = sp.payload.labelled_uv(N_MARKERS, True, self.config.drop_merged)
+            c = self._cam_index[mote_id]
+            uv[c] = sp.payload.labelled_uv(N_MARKERS, True, self.config.drop_merged)
+            packets[c] = sp.payload
+        uv = self.labeller.fill(uv, packets, t)
         repaired = False
         res = self.triangulator.triangulate(uv)
         if self.swap_config.enabled:
@@ -227,10 +234,10 @@ class Server:
 
     def _frame(self, frame) -> PoseMessage:
         self.stats.frames += 1
-        markers, mask, repaired = self.markers_for(frame)
         if self._t0_ns is None:
             self._t0_ns = frame.t_ns
         t = (frame.t_ns - self._t0_ns) / 1e9
+        markers, mask, repaired = self.markers_for(frame, t)
         joints = np.full((N_JOINTS, 3), np.nan)
         residual, flags = float("nan"), 0
         lag_ms = (self.clock() - frame.t_ns) / 1e6
@@ -247,6 +254,7 @@ class Server:
             if np.isfinite(joints).all():
                 flags |= FLAG_SOLVED
                 self.stats.solved += 1
+                self.labeller.observe(t, joints)
         if not frame.complete:
             flags |= FLAG_INCOMPLETE
         if repaired:

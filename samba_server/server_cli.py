@@ -21,6 +21,7 @@ from samba_common.calib import CalibrationError, CameraRig
 from samba_common.config import ConfigError, from_dict, read_toml
 
 from .reconstruct import ReconstructConfig
+from .relabel import RelabelConfig
 from .record import Recorder, RecorderError
 from .server import Server, ServerConfig
 from .swap import SwapConfig
@@ -39,6 +40,7 @@ class ServerConfigs:
     triangulate: TriangulateConfig
     swap: SwapConfig
     reconstruct: ReconstructConfig
+    relabel: RelabelConfig
 
 
 def default_config_path() -> Path:
@@ -58,6 +60,7 @@ def load_server_configs(path: str | os.PathLike | None = None, **sync_overrides)
         triangulate=from_dict(TriangulateConfig, data.get("triangulate", {}), f"{p} [triangulate]"),
         swap=from_dict(SwapConfig, data.get("swap", {}), f"{p} [swap]"),
         reconstruct=from_dict(ReconstructConfig, data.get("reconstruct", {}), f"{p} [reconstruct]"),
+        relabel=from_dict(RelabelConfig, data.get("relabel", {}), f"{p} [relabel]"),
     )
 
 
@@ -98,7 +101,7 @@ def build_server(calibration: str | os.PathLike, configs: ServerConfigs, db: str
     recorder = Recorder(record, metadata={"tool": "samba-server"}) if record else None
     return Server(rig, calibration_toml=toml, reconstructor=make_reconstructor(db, configs.reconstruct), config=server_cfg,
                   sync_config=configs.sync, tri_config=configs.triangulate, swap_config=configs.swap,
-                  recorder=recorder)
+                  recorder=recorder, relabel_config=configs.relabel)
 
 
 def export_joints(server: Server, path: str | os.PathLike) -> int:

@@ -54,14 +54,9 @@ def _run_process(tmp_path):
     return err, ref
 
 
-def test_process_videos_end_to_end(tmp_path):
-    err, ref = _run_process(tmp_path)
-    assert err <= ref + 0.02  # regression guard; the target is below
-
-
-@pytest.mark.xfail(reason="mote-side detection/labelling: a knee marker is biased ~3 cm in the standard pose and "
-                          "labels swap in motion; measured +1.4 cm over the clean-marker reconstruction", strict=False)
-def test_process_within_half_a_centimetre_of_clean_markers(tmp_path):
+def test_process_videos_within_half_a_centimetre_of_clean_markers(tmp_path):
+    """Rendered videos -> mote pipeline -> server pipeline: within +0.5 cm of the reconstruction
+    from the true markers (the issue's target)."""
     err, ref = _run_process(tmp_path)
     assert err <= ref + 0.005
 
