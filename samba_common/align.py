@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .skeleton import MARKER_JOINT, M
+from .skeleton import M
 
 _WORLD_FALLBACKS = (np.array([0.0, 0.0, 1.0]), np.array([0.0, 1.0, 0.0]))
 
@@ -94,11 +94,6 @@ def marker_frame(markers: np.ndarray, scale: float | None = None) -> Frame:
     downs = [_mid(markers[M["left_ankle"]], markers[M["right_ankle"]]),
              _mid(markers[M["left_knee"]], markers[M["right_knee"]])]
     return body_frame(markers[M["left_shoulder"]], markers[M["right_shoulder"]], downs, scale)
-
-
-def joint_frame(joints: np.ndarray, scale: float | None = None) -> Frame:
-    """The same body frame from a 13-joint set (13, 3) (its 8 marker joints decide it)."""
-    return marker_frame(joints[list(MARKER_JOINT)], scale)
 
 
 def align(points: np.ndarray, frame: Frame) -> np.ndarray:

@@ -70,16 +70,3 @@ BONE_TYPES: tuple[str, ...] = (
     "thigh",
     "shin",
 )
-
-#: segments (start joint, end joint) measured for each bone type; ``None`` stands for the
-#: midpoint of the shoulders (start of torso/neck) and "hipmid" for the midpoint of the hips.
-BONE_SEGMENTS: dict[str, tuple[tuple[str, str], ...]] = {
-    "shoulder_width": (("left_shoulder", "right_shoulder"),),
-    "hip_width": (("left_hip", "right_hip"),),
-    "torso": (("shouldermid", "hipmid"),),
-    "neck": (("shouldermid", "head"),),
-    "upper_arm": (("left_shoulder", "left_elbow"), ("right_shoulder", "right_elbow")),
-    "forearm": (("left_elbow", "left_wrist"), ("right_elbow", "right_wrist")),
-    "thigh": (("left_hip", "left_knee"), ("right_hip", "right_knee")),
-    "shin": (("left_knee", "left_ankle"), ("right_knee", "right_ankle")),
-}

@@ -30,8 +30,6 @@ FAST = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 from .kdtree import knn
 
-N_BONES = 11
-N_PARAMS = 27
 N_POSE = 42
 N_ANGLES = 17  # neck 2, spine 1, pelvis 2, 4 limbs x (ball 2 + hinge 1)
 
@@ -71,11 +69,6 @@ def param_col(b: int, k: int) -> int:
     if b == SPINE:
         return 10 if k == 0 else -1
     return 6 + 2 * b + k - 1
-
-
-@njit(cache=True, fastmath=FAST)
-def _cross(a, b):
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 @njit(cache=True, fastmath=FAST)
