@@ -20,6 +20,7 @@ Pixel coordinates: origin at the centre of the top-left pixel, u right, v down.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import cv2
@@ -82,6 +83,18 @@ class Detections:
                    threshold, np.zeros((0, 3), np.float32))
 
 
+_LEVELS = np.arange(256)  # grey levels of uint8 frames
+
+
+def _hist_median(hist: np.ndarray) -> float:
+    """Median of the values 0..len(hist)-1 counted by hist (same value as np.median: the
+    mean of the two middle values for an even count)."""
+    c = np.cumsum(hist)
+    n = int(c[-1])
+    lo, hi = np.searchsorted(c, [(n - 1) // 2, n // 2], side="right").tolist()
+    return float(hi) if lo == hi else (lo + hi) / 2.0
+
+
 class StaticMask:
     """Learns blobs that never move and masks them. Positions in px."""
 
@@ -90,6 +103,7 @@ class StaticMask:
         self.pos = np.zeros((0, 2))  # candidate positions (running mean)
         self.count = np.zeros(0, np.int64)  # consecutive frames seen still
         self.absent = np.zeros(0, np.int64)  # consecutive frames not seen
+        self._static: list | None = None  # cache of static.tolist()
 
     @property
     def static(self) -> np.ndarray:
@@ -98,15 +112,28 @@ class StaticMask:
 
     def apply(self, uv: np.ndarray) -> np.ndarray:
         """(N,) bool keep-mask for blobs uv (N, 2) against the learnt distractors only."""
-        st = self.static
-        if not len(st) or not len(uv):
-            return np.ones(len(uv), bool)
-        d2 = ((uv[:, None, :] - st[None, :, :]) ** 2).sum(-1)
-        return d2.min(axis=1) > self.radius ** 2
+        return np.array(self.apply_list(uv.tolist()), bool).reshape(len(uv))
+
+    def apply_list(self, uv: list) -> list[bool]:
+        """apply() on N [u, v] pairs as plain Python floats (cheaper for a few blobs per frame)."""
+        if self._static is None:  # learnt positions, cached until the next update()
+            self._static = self.static.tolist()
+        st = self._static
+        if not st or not uv:
+            return [True] * len(uv)
+        r2 = self.radius ** 2
+        keep = []
+        for u, v in uv:
+            d2 = min((u - su) * (u - su) + (v - sv) * (v - sv) for su, sv in st)
+            keep.append(d2 > r2)
+        return keep
 
     def update(self, uv: np.ndarray) -> np.ndarray:
         """Learn from this frame's blobs (N, 2); returns a (N,) bool keep-mask (False = distractor)."""
+        self._static = None
         n = len(uv)
+        if len(self.pos) * n <= 1024:  # the usual few blobs: plain Python floats are cheaper
+            return self._update_small(uv)
         keep = np.ones(n, bool)
         matched = np.zeros(len(self.pos), bool)
         new = np.ones(n, bool)
@@ -142,6 +169,59 @@ class StaticMask:
         return keep
 
 
+    def _update_small(self, uv: np.ndarray) -> np.ndarray:
+        """update() on Python lists, for few blobs and candidates (same results, fewer numpy calls)."""
+        uvl = uv.tolist()
+        pos, count, absent = self.pos.tolist(), self.count.tolist(), self.absent.tolist()
+        frames, r2 = self.frames, self.radius ** 2
+        n, K = len(uvl), len(pos)
+        keep = [True] * n
+        matched = [False] * K
+        new = [True] * n
+        if K and n:
+            moves = []  # (candidate, new position), computed from the old positions
+            bumped = set()
+            for i, (u, v) in enumerate(uvl):
+                best, j = math.inf, 0
+                for q, (pu, pv) in enumerate(pos):
+                    d2 = (u - pu) * (u - pu) + (v - pv) * (v - pv)
+                    if d2 < best:
+                        best, j = d2, q
+                if best <= r2:
+                    new[i] = False
+                    matched[j] = True
+                    bumped.add(j)
+                    if count[j] >= frames:
+                        keep[i] = False
+                    else:
+                        c = min(count[j], 50)
+                        moves.append((j, [(pos[j][0] * c + u) / (c + 1), (pos[j][1] * c + v) / (c + 1)]))
+            for j, p in moves:  # (several blobs on one candidate: the last one wins)
+                pos[j] = p
+            for j in bumped:
+                count[j] += 1
+        forget = self.forget
+        for q in range(K):
+            absent[q] = 0 if matched[q] else absent[q] + 1
+        alive = [(absent[q] <= forget) if count[q] >= frames else matched[q] for q in range(K)]
+        if not all(alive):
+            pos = [p for p, a in zip(pos, alive) if a]
+            count = [c for c, a in zip(count, alive) if a]
+            absent = [b for b, a in zip(absent, alive) if a]
+        for i in range(n):
+            if new[i]:
+                pos.append(uvl[i])
+                count.append(1)
+                absent.append(0)
+        self.pos = np.array(pos, np.float64).reshape(-1, 2)
+        self.count = np.array(count, np.int64)
+        self.absent = np.array(absent, np.int64)
+        if len(self.pos) > 256:  # bound memory under heavy noise
+            order = np.argsort(-self.count)[:256]
+            self.pos, self.count, self.absent = self.pos[order], self.count[order], self.absent[order]
+        return np.array(keep, bool)
+
+
 class Detector:
     """Stateful blob detector (auto threshold statistics, static mask). Not thread-safe."""
 
@@ -155,17 +235,21 @@ class Detector:
         self.mask = StaticMask(max(self.cfg.static_frames // every, 1), self.cfg.static_radius,
                                max(self.cfg.static_forget // every, 1))
         self.masked = 0  #: blobs dropped by the static mask, total
+        self._kernel = np.ones((2 * self.cfg.pad + 1, 2 * self.cfg.pad + 1), np.uint8)
 
     def _update_threshold(self, img: np.ndarray) -> None:
-        sub = img[::4, ::4]
-        bg = float(np.median(sub))
-        mad = float(np.median(np.abs(sub.astype(np.int16) - int(bg))))
+        # medians from a 256-bin histogram (exactly np.median's values, several times faster)
+        hist = np.bincount(img[::4, ::4].ravel(), minlength=256)
+        bg = _hist_median(hist)
+        # |grey - int(bg)| histogram: bin d gathers the grey levels int(bg) +- d
+        dev = np.bincount(np.abs(_LEVELS - int(bg)), weights=hist, minlength=256)
+        mad = _hist_median(dev)
         self.background = bg
         self.noise = max(1.4826 * mad, 0.5)
         if self.cfg.threshold_mode == "auto":
             peak = float(img.max())
             thr = max(bg + self.cfg.auto_sigmas * self.noise, bg + self.cfg.auto_fraction * (peak - bg))
-            self.threshold = int(np.clip(round(thr), self.cfg.auto_min, self.cfg.auto_max))
+            self.threshold = int(min(max(round(thr), self.cfg.auto_min), self.cfg.auto_max))
 
     def detect(self, img: np.ndarray) -> Detections:
         """img: (H, W) uint8 grey frame -> Detections (after filters and static mask)."""
@@ -187,34 +271,38 @@ class Detector:
         floor = int(min(self.background + cfg.floor_sigmas * self.noise, thr - 1))
         pad = cfg.pad
         min_area, max_area, max_aspect, min_fill = cfg.min_area, cfg.max_area, cfg.max_aspect, cfg.min_fill
-        labels = None
-        kernel = None
+        # centroid weights for the whole frame at once (one call instead of one per blob)
+        full = cv2.subtract(img, floor)
+        bounding_rect, count_nonzero, moments = cv2.boundingRect, cv2.countNonZero, cv2.moments
+        kernel = self._kernel
         rows = []
+        speck = min_area > 1  # one-point contours (1x1 px) can be skipped unseen
         for c in contours:
-            x, y, bw, bh = cv2.boundingRect(c)
+            if speck and len(c) == 1:
+                continue
+            x, y, bw, bh = bounding_rect(c)
             if bw * bh < min_area or (bw > max_aspect * bh + 1 or bh > max_aspect * bw + 1):
+                continue
+            area = count_nonzero(binary[y:y + bh, x:x + bw])
+            # (the blob's own pixel count below is <= this count, so the fill test can go first)
+            if area > max_area or area < min_area or area < min_fill * bw * bh:
                 continue
             x0, y0 = x - pad if x > pad else 0, y - pad if y > pad else 0
             x1, y1 = min(x + bw + pad, w), min(y + bh + pad, h)
-            area = cv2.countNonZero(binary[y:y + bh, x:x + bw])
-            if area > max_area or area < min_area:
-                continue
-            roi = img[y0:y1, x0:x1]
-            weights = cv2.subtract(roi, floor)
-            if cv2.countNonZero(binary[y0:y1, x0:x1]) != area:
+            weights = full[y0:y1, x0:x1]
+            if count_nonzero(binary[y0:y1, x0:x1]) != area:
                 # another blob reaches into the padded ROI: weight only this blob's pixels
                 # and the background around them
-                if labels is None:
-                    labels = cv2.connectedComponents(binary, connectivity=8)[1]
-                    kernel = np.ones((2 * pad + 1, 2 * pad + 1), np.uint8)
-                lab = labels[y0:y1, x0:x1]
-                own = (lab == labels[c[0, 0, 1], c[0, 0, 0]]).astype(np.uint8)
-                area = int(own.sum())
+                # (components of the ROI alone: the blob lies inside its box, so its ROI component
+                # is exactly the blob; a contour point is one of its pixels)
+                lab = cv2.connectedComponents(binary[y0:y1, x0:x1], connectivity=8)[1]
+                own = (lab == lab[c[0, 0, 1] - y0, c[0, 0, 0] - x0]).astype(np.uint8)
+                area = count_nonzero(own)
                 near = cv2.dilate(own, kernel) & ((lab == 0) | (own > 0)).astype(np.uint8)
                 weights = weights * near
-            if area < min_area or area < min_fill * bw * bh:
-                continue
-            m = cv2.moments(weights)
+                if area < min_area or area < min_fill * bw * bh:
+                    continue
+            m = moments(weights)
             m00 = m["m00"]
             if m00 <= 0:
                 continue
@@ -229,9 +317,12 @@ class Detector:
             # learn every `static_every` frames (counts are in learning steps), mask every frame
             if self._frame_no % cfg.static_every == 0:
                 keep = self.mask.update(a[:, :2])
+                dropped = int((~keep).sum())
             else:
-                keep = self.mask.apply(a[:, :2])
-            self.masked += int((~keep).sum())
-            a = a[keep]
+                keep = self.mask.apply_list(a[:, :2].tolist())
+                dropped = len(keep) - sum(keep)
+            if dropped:
+                self.masked += dropped
+                a = a[keep]
         return Detections(a[:, :2].astype(np.float32), a[:, 2].astype(np.int32), a[:, 3:5].astype(np.int32),
                           thr, a[:, 5:8].astype(np.float32))

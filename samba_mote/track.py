@@ -23,6 +23,7 @@ Units: pixels and pixels per second; time from the frame's ``t_ns``.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -74,6 +75,15 @@ class TrackConfig:
             raise ValueError(f"tpose_view must be 'front' or 'back', got {self.tpose_view!r}")
 
 
+def _major_axis(vu: float, cuv: float, vv: float) -> tuple[float, float, float]:
+    """Second moments (var_u, cov_uv, var_v) px^2 -> (d, eu, ev): d = 2 sqrt(l1 - l0) px (the
+    eigenvalue gap of the 2x2 covariance) and (eu, ev) the unit major axis (closed form: a
+    LAPACK call costs ~20 us on a mote)."""
+    gap = math.sqrt((vu - vv) ** 2 + 4.0 * cuv * cuv)
+    theta = 0.5 * math.atan2(2.0 * cuv, vu - vv)
+    return 2.0 * math.sqrt(gap), math.cos(theta), math.sin(theta)
+
+
 @dataclass
 class TrackOutput:
     """Records for one packet: labels (N,) uint8, uv (N, 2) float32, area (N,) uint16, flags (N,) uint8."""
@@ -91,11 +101,13 @@ class MarkerTracker:
         self.cfg = config or TrackConfig()
         self.view = view or self.cfg.tpose_view
         self.initialised = False
-        self.pos = np.full((N_MARKERS, 2), np.nan)
-        self.vel = np.zeros((N_MARKERS, 2))
-        self.area = np.zeros(N_MARKERS)
-        self.missing = np.zeros(N_MARKERS, np.int64)
-        self.stale = np.zeros(N_MARKERS, np.int64)  # frames since a clean (unmerged) measurement
+        # per-track state as plain Python lists (8 tracks: cheaper than numpy calls per frame);
+        # the pos/vel/area/missing/stale properties give numpy copies
+        self._pos: list[list[float]] = [[math.nan, math.nan] for _ in range(N_MARKERS)]
+        self._vel: list[list[float]] = [[0.0, 0.0] for _ in range(N_MARKERS)]
+        self._area: list[float] = [0.0] * N_MARKERS
+        self._missing: list[int] = [0] * N_MARKERS
+        self._stale: list[int] = [0] * N_MARKERS  # frames since a clean (unmerged) measurement
         self.certain = np.ones(N_MARKERS, bool)  # identity sure (else published unlabelled)
         self.partners: list[set[int]] = [set() for _ in range(N_MARKERS)]  # merged with, this episode
         self.uncertain_events = 0
@@ -106,6 +118,51 @@ class MarkerTracker:
         self._init_prev: np.ndarray | None = None
         self.swaps_suspected = 0
         self.reinits = 0
+
+    @property
+    def pos(self) -> np.ndarray:
+        """(8, 2) float px: each track's position (NaN before labelling); a copy."""
+        return np.array(self._pos, np.float64).reshape(N_MARKERS, 2)
+
+    @pos.setter
+    def pos(self, value: np.ndarray) -> None:
+        self._pos = np.asarray(value, np.float64).reshape(N_MARKERS, 2).tolist()
+
+    @property
+    def vel(self) -> np.ndarray:
+        """(8, 2) float px/s: each track's velocity; a copy."""
+        return np.array(self._vel, np.float64).reshape(N_MARKERS, 2)
+
+    @vel.setter
+    def vel(self, value: np.ndarray) -> None:
+        self._vel = np.asarray(value, np.float64).reshape(N_MARKERS, 2).tolist()
+
+    @property
+    def area(self) -> np.ndarray:
+        """(8,) float px: each track's learnt single-marker blob area (0 = unknown); a copy."""
+        return np.array(self._area, np.float64)
+
+    @area.setter
+    def area(self, value: np.ndarray) -> None:
+        self._area = np.asarray(value, np.float64).reshape(N_MARKERS).tolist()
+
+    @property
+    def missing(self) -> np.ndarray:
+        """(8,) int64: frames each track has gone unmeasured; a copy."""
+        return np.array(self._missing, np.int64)
+
+    @missing.setter
+    def missing(self, value: np.ndarray) -> None:
+        self._missing = np.asarray(value, np.int64).reshape(N_MARKERS).tolist()
+
+    @property
+    def stale(self) -> np.ndarray:
+        """(8,) int64: frames since each track's last clean (unmerged) measurement; a copy."""
+        return np.array(self._stale, np.int64)
+
+    @stale.setter
+    def stale(self, value: np.ndarray) -> None:
+        self._stale = np.asarray(value, np.int64).reshape(N_MARKERS).tolist()
 
     def reset(self) -> None:
         """Forget all identities (the next T-pose labels again)."""
@@ -129,11 +186,11 @@ class MarkerTracker:
         self._init_streak += 1
         if self._init_streak < self.cfg.init_frames:
             return False
-        self.pos = pts.copy()
-        self.vel[:] = 0.0
+        self.pos = pts
+        self.vel = np.zeros((N_MARKERS, 2))
         self.area = area[found[0]].astype(float)
-        self.missing[:] = 0
-        self.stale[:] = 0
+        self.missing = np.zeros(N_MARKERS, np.int64)
+        self.stale = np.zeros(N_MARKERS, np.int64)
         self.certain[:] = True
         self.partners = [set() for _ in range(N_MARKERS)]
         self.unresolved[:] = False
@@ -145,21 +202,26 @@ class MarkerTracker:
     # -------------------------------------------------------------------------------- tracking
     def update(self, t_ns: int, uv: np.ndarray, area: np.ndarray, cov: np.ndarray | None = None) -> TrackOutput:
         """One frame: blobs uv (N, 2) px, area (N,) px and optional second moments cov (N, 3)
-        (var_u, cov_uv, var_v, px^2, used to split merged pairs) -> packet records."""
+        (var_u, cov_uv, var_v, px^2, used to split merged pairs) -> packet records.
+
+        Per-track work runs on plain Python floats (8 tracks: cheaper than numpy calls); only
+        the (8, N) distance matrix is computed with numpy."""
         uv = np.asarray(uv, np.float64).reshape(-1, 2)
         area = np.asarray(area, np.float64).reshape(-1)
         n = len(uv)
-        dt = 1.0 / self.cfg.default_fps
+        cfg = self.cfg
+        dt = 1.0 / cfg.default_fps
         if self._last_t is not None and t_ns > self._last_t:
             dt = min((t_ns - self._last_t) * 1e-9, 0.5)
         self._last_t = t_ns
         self._frame += 1
-        if self.cfg.mode == "unlabelled":
+        if cfg.mode == "unlabelled":
             return self._unlabelled(uv, area)
-        cfg = self.cfg
-        n_lost = int((self.missing > cfg.coast_frames).sum())
+        coast = cfg.coast_frames
+        MI = self._missing
+        n_lost = sum(1 for x in MI if x > coast)
         recheck = (self.initialised and cfg.recheck_every > 0 and self._frame % cfg.recheck_every == 0
-                   and len(uv) == N_MARKERS)
+                   and n == N_MARKERS)
         if not self.initialised or n_lost >= cfg.reinit_lost or recheck:
             was = self.initialised
             if self._try_init(uv, area, relabel_only=recheck and n_lost < cfg.reinit_lost):
@@ -168,60 +230,71 @@ class MarkerTracker:
                 return self._output(uv, area, {m: int(b) for m, b in enumerate(self._init_index(uv))}, set(), n)
             if not self.initialised:
                 return self._unlabelled(uv, area)
-        move = self.vel * dt
-        pred = self.pos + move
-        step = np.hypot(move[:, 0], move[:, 1])
-        active = self.missing <= cfg.coast_frames  # merged tracks stay active
-        gate = np.minimum(cfg.gate_px + cfg.gate_speed * step + cfg.gate_growth * self.stale, cfg.gate_max)
-        finite = np.isfinite(pred).all(axis=1)
+        # the state lists are updated in place at the end (their items are replaced, never mutated)
+        P, V, A, ST = self._pos, self._vel, self._area, self._stale
+        gate_px, gate_speed, gate_growth, gate_max = cfg.gate_px, cfg.gate_speed, cfg.gate_growth, cfg.gate_max
+        PR: list[list[float]] = []
+        gl: list[float] = []
+        fin: list[bool] = []
+        for m in range(N_MARKERS):
+            mu, mv = V[m][0] * dt, V[m][1] * dt
+            pu, pv = P[m][0] + mu, P[m][1] + mv
+            PR.append([pu, pv])
+            gl.append(min(gate_px + gate_speed * math.hypot(mu, mv) + gate_growth * ST[m], gate_max))
+            fin.append(math.isfinite(pu) and math.isfinite(pv))
+        active = [x <= coast for x in MI]  # merged tracks stay active
+        all_active, all_finite = all(active), all(fin)
+        pred = np.array(PR)
         assigned: dict[int, int] = {}
         if n:
             D = np.hypot(pred[:, 0:1] - uv[:, 0], pred[:, 1:2] - uv[:, 1])
-            if not finite.all():
-                D[~finite] = np.inf
+            if not all_finite:
+                D[~np.array(fin)] = np.inf
             # stage 1: active tracks; ties (two tracks at one place) go to the track measured
             # cleanly most recently
-            Da = D if active.all() else np.where(active[:, None], D, np.inf)
-            cost = Da + cfg.stale_penalty * self.stale[:, None] if self.stale.any() else None
-            assigned.update(_min_cost_assignment(Da, gate, cost))
-        else:
-            D = np.zeros((N_MARKERS, 0))
+            Da = D if all_active else np.where(np.array(active)[:, None], D, np.inf)
+            assigned.update(_min_cost_assignment(Da, gl, penalty=ST, penalty_scale=cfg.stale_penalty))
+        Dl: list[list[float]] = []  # D as lists, when needed
         # merge detection: an unassigned active track whose prediction lies inside an assigned
         # blob, or near one that is larger than one marker, shares that blob
-        blob_r = np.sqrt(np.maximum(area, 1.0) / np.pi)
-        owner = {b: m for m, b in assigned.items()}
+        arl = area.tolist()
+        blob_r: list[float] = []  # blob radius (px), computed when needed
         merged: set[int] = set()
-        for m in range(N_MARKERS):
-            if m in assigned or not n or not active[m] or not finite[m]:
-                continue
-            for b in np.argsort(D[m])[:3]:
-                b = int(b)
-                if b not in owner or D[m, b] >= gate[m]:
+        if n and len(assigned) < N_MARKERS:
+            Dl = D.tolist()
+            blob_r = [math.sqrt(max(a, 1.0) / math.pi) for a in arl]
+            owner = {b: m for m, b in assigned.items()}
+            margin, ratio = cfg.merge_margin, cfg.merge_area_ratio
+            for m in range(N_MARKERS):
+                if m in assigned or not active[m] or not fin[m]:
                     continue
-                other = owner[b]
-                expected = max(min(self.area[m], self.area[other]), 1.0)
-                inside = D[m, b] <= blob_r[b] + cfg.merge_margin
-                big = area[b] >= cfg.merge_area_ratio * expected and D[m, b] <= blob_r[b] + cfg.merge_margin + 1.0
-                if inside or big:
-                    assigned[m] = b
-                    merged |= {m, other}
-                    break
+                Dm = Dl[m]
+                for b in sorted(range(n), key=Dm.__getitem__)[:3]:
+                    if b not in owner or Dm[b] >= gl[m]:
+                        continue
+                    other = owner[b]
+                    expected = max(min(A[m], A[other]), 1.0)
+                    inside = Dm[b] <= blob_r[b] + margin
+                    big = arl[b] >= ratio * expected and Dm[b] <= blob_r[b] + margin + 1.0
+                    if inside or big:
+                        assigned[m] = b
+                        merged |= {m, other}
+                        break
         # a blob much larger than its track's single-marker area holds another marker we do not
         # track right now (lost or never seen): its centroid is biased and its split unsure
-        if assigned:
-            ms = np.fromiter(assigned.keys(), int, len(assigned))
-            bs = np.fromiter(assigned.values(), int, len(assigned))
-            big = (self.area[ms] > 0) & (area[bs] >= cfg.merge_area_ratio * self.area[ms] + 2.0)
-            for m in ms[big].tolist():
-                if m not in merged:
-                    merged.add(m)
-                    self.partners[m].add(-1)
-                    self.unresolved[m] = True
+        ratio = cfg.merge_area_ratio
+        for m, b in list(assigned.items()):
+            if A[m] > 0 and arl[b] >= ratio * A[m] + 2.0 and m not in merged:
+                merged.add(m)
+                self.partners[m].add(-1)
+                self.unresolved[m] = True
         # stage 2: lost tracks re-acquire blobs nobody claimed, nearest first
-        if n and not active.all():
+        if n and not all_active:
+            if not Dl:
+                Dl = D.tolist()
             taken = set(assigned.values())
-            cands = sorted((D[m, b], int(m), b) for m in np.flatnonzero(~active) for b in range(n)
-                           if b not in taken and D[m, b] < gate[m])
+            cands = sorted((Dl[m][b], m, b) for m in range(N_MARKERS) if not active[m] for b in range(n)
+                           if b not in taken and Dl[m][b] < gl[m])
             for _d, m, b in cands:
                 if m not in assigned and b not in taken:
                     assigned[m] = b
@@ -229,49 +302,60 @@ class MarkerTracker:
                     self._doubt(m)
         # a merged pair: split the blob along its long axis (second moments), keeping the
         # pair's predicted relative offset to tell which end is which
-        sub: dict[int, np.ndarray] = {}
+        sub: dict[int, list[float]] = {}
         groups: dict[int, list[int]] = {}
         for m in merged:
             groups.setdefault(assigned[m], []).append(m)
+        uvl = uv.tolist()
+        if groups and not blob_r:
+            blob_r = [math.sqrt(max(a, 1.0) / math.pi) for a in arl]
         for b, ms in groups.items():
+            bu, bv = uvl[b]
             if len(ms) == 2 and cov is not None:
                 a_, c_ = sorted(ms)
-                rel = pred[a_] - pred[c_]
-                if not np.isfinite(rel).all():
-                    rel = np.zeros(2)
-                vu, cuv, vv = (float(x) for x in cov[b])
-                ev, evec = np.linalg.eigh(np.array([[vu, cuv], [cuv, vv]]))
-                d = 2.0 * np.sqrt(max(ev[1] - ev[0], 0.0))
-                single = max(min(self.area[a_], self.area[c_]), 1.0)
-                if d < cfg.split_min_px or area[b] < cfg.merge_area_ratio * single:
+                ru, rv = PR[a_][0] - PR[c_][0], PR[a_][1] - PR[c_][1]
+                if not (math.isfinite(ru) and math.isfinite(rv)):
+                    ru, rv = 0.0, 0.0
+                vu, cuv, vv = (float(x) for x in cov[b].tolist())
+                d, eu, ev = _major_axis(vu, cuv, vv)
+                single = max(min(A[a_], A[c_]), 1.0)
+                if d < cfg.split_min_px or arl[b] < cfg.merge_area_ratio * single:
                     # no visible second marker: merged head-on, or one hides the other
                     self.unresolved[a_] = self.unresolved[c_] = True
                 if d >= cfg.split_min_px:
-                    sep = d * evec[:, 1]
-                    if sep @ rel < 0:
-                        sep = -sep
+                    su, sv = d * eu, d * ev
+                    dot = su * ru + sv * rv
+                    if dot == 0.0:  # no preferred end: keep LAPACK's sign (as eigh gives it)
+                        evec = np.linalg.eigh(np.array([[vu, cuv], [cuv, vv]]))[1]
+                        su, sv = d * float(evec[0, 1]), d * float(evec[1, 1])
+                    elif dot < 0:
+                        su, sv = -su, -sv
                 else:
-                    sep = rel if np.linalg.norm(rel) < 2 * blob_r[b] else rel * (2 * blob_r[b] / np.linalg.norm(rel))
-                sub[a_] = uv[b] + sep / 2
-                sub[c_] = uv[b] - sep / 2
+                    norm = math.hypot(ru, rv)
+                    if norm < 2 * blob_r[b]:
+                        su, sv = ru, rv
+                    else:
+                        s = 2 * blob_r[b] / norm
+                        su, sv = ru * s, rv * s
+                sub[a_] = [bu + su / 2, bv + sv / 2]
+                sub[c_] = [bu - su / 2, bv - sv / 2]
             else:
                 for m in ms:
                     self.unresolved[m] = True
+                r = blob_r[b]
                 for m in ms:  # three or more: coast, but stay inside the blob
-                    off = pred[m] - uv[b]
-                    norm = float(np.linalg.norm(off))
-                    sub[m] = uv[b] + (off * (blob_r[b] / norm) if norm > blob_r[b] else off)
-        self._update_certainty(pred, uv, assigned, merged, groups, gate)
+                    ou, ov = PR[m][0] - bu, PR[m][1] - bv
+                    norm = math.hypot(ou, ov)
+                    if norm > r:
+                        ou, ov = ou * (r / norm), ov * (r / norm)
+                    sub[m] = [bu + ou, bv + ov]
+        self._update_certainty(pred, uv, assigned, merged, groups, gl, MI, fin)
         # state update (plain Python floats: cheaper than numpy calls for 8 tracks)
-        P, V, A = self.pos.tolist(), self.vel.tolist(), self.area.tolist()
-        MI, ST = self.missing.tolist(), self.stale.tolist()
-        PR, fin = pred.tolist(), finite.tolist()
-        uvl, arl = uv.tolist(), area.tolist()
-        alpha, beta, coast, decay = cfg.alpha, cfg.beta, cfg.coast_frames, cfg.coast_decay
+        alpha, beta, decay = cfg.alpha, cfg.beta, cfg.coast_decay
         for m in range(N_MARKERS):
             b = assigned.get(m)
             if b is not None:
-                z = sub[m].tolist() if m in sub else uvl[b]
+                z = sub[m] if m in sub else uvl[b]
                 if MI[m] > 0 or not fin[m]:
                     P[m], V[m] = [z[0], z[1]], [0.0, 0.0]
                 else:
@@ -296,9 +380,7 @@ class MarkerTracker:
                     P[m], V[m] = PR[m], [V[m][0] * decay, V[m][1] * decay]
                 else:
                     V[m] = [0.0, 0.0]
-        self.pos, self.vel, self.area = np.array(P), np.array(V), np.array(A)
-        self.missing, self.stale = np.array(MI, np.int64), np.array(ST, np.int64)
-        return self._output(uv, area, assigned, merged, n)
+        return self._output(uv, area, assigned, merged, n, (uvl, arl, P, MI))
 
     def _doubt(self, m: int) -> None:
         if self.certain[m]:
@@ -306,10 +388,12 @@ class MarkerTracker:
             self.uncertain_events += 1
 
     def _update_certainty(self, pred: np.ndarray, uv: np.ndarray, assigned: dict[int, int], merged: set[int],
-                          groups: dict[int, list[int]], gate: np.ndarray) -> None:
+                          groups: dict[int, list[int]], gate: list[float], missing: list[int],
+                          finite: list[bool]) -> None:
         """Identity bookkeeping: a pair leaving a merge keeps its labels only if the split was
         unambiguous; a track back from a gap keeps its label only if no other track could
-        claim its blob; the last uncertain track of eight becomes certain by elimination."""
+        claim its blob; the last uncertain track of eight becomes certain by elimination.
+        pred (8, 2) px; gate, missing, finite: per track, before this frame's update."""
         cfg = self.cfg
         for ms in groups.values():
             for m in ms:
@@ -321,7 +405,7 @@ class MarkerTracker:
                 for k in list(self.partners[m]):
                     if k < 0:  # an unknown marker shared the blob
                         doubt = True
-                    elif k in clean and np.isfinite(pred[m]).all() and np.isfinite(pred[k]).all():
+                    elif k in clean and finite[m] and finite[k]:
                         zm, zk = uv[b], uv[clean[k]]
                         same = np.sum((pred[m] - zm) ** 2) + np.sum((pred[k] - zk) ** 2)
                         swap = np.sum((pred[m] - zk) ** 2) + np.sum((pred[k] - zm) ** 2)
@@ -341,26 +425,32 @@ class MarkerTracker:
                     self._doubt(m)
                 self.partners[m] = set()
                 self.unresolved[m] = False
-            elif self.missing[m] > cfg.doubt_after_gap and np.isfinite(pred[m]).all():
-                others = [k for k in range(N_MARKERS) if k != m and np.isfinite(pred[k]).all()
+            elif missing[m] > cfg.doubt_after_gap and finite[m]:
+                others = [k for k in range(N_MARKERS) if k != m and finite[k]
                           and np.linalg.norm(pred[k] - uv[b]) < gate[k] + gate[m]]
                 if others:
                     self._doubt(m)
         # elimination: all eight measured as separate blobs and only one of them uncertain
-        unsure = np.flatnonzero(~self.certain)
-        if len(unsure) == 1 and len(clean) == N_MARKERS and len(set(clean.values())) == N_MARKERS:
-            self.certain[unsure[0]] = True
+        if len(clean) == N_MARKERS:
+            unsure = [m for m, c in enumerate(self.certain.tolist()) if not c]
+            if len(unsure) == 1 and len(set(clean.values())) == N_MARKERS:
+                self.certain[unsure[0]] = True
 
     def _init_index(self, uv: np.ndarray) -> np.ndarray:
         D = np.linalg.norm(self.pos[:, None, :] - uv[None, :, :], axis=2)
         return D.argmin(1)
 
-    def _output(self, uv: np.ndarray, area: np.ndarray, assigned: dict[int, int], merged: set[int], n: int) -> TrackOutput:
+    def _output(self, uv: np.ndarray, area: np.ndarray, assigned: dict[int, int], merged: set[int], n: int,
+                lists: tuple[list, list, list, list] | None = None) -> TrackOutput:
         """Packet records: one per marker (measured, predicted or lost; uncertain ones unlabelled),
-        then every blob no track claimed (unlabelled)."""
+        then every blob no track claimed (unlabelled). lists: (uv, area, pos, missing) already
+        as Python lists (saves converting them again)."""
         labels, pts, areas, flags = [], [], [], []
-        uvl, arl = uv.tolist(), area.tolist()
-        posl, cert, miss = self.pos.tolist(), self.certain.tolist(), self.missing.tolist()
+        if lists is None:
+            uvl, arl, posl, miss = uv.tolist(), area.tolist(), self._pos, self._missing
+        else:
+            uvl, arl, posl, miss = lists
+        cert = self.certain.tolist()
         coast = self.cfg.coast_frames
         used = set(assigned.values())
         emitted: set[int] = set()
@@ -384,14 +474,17 @@ class MarkerTracker:
                 pts.append(posl[m])
                 areas.append(0)
                 flags.append(FLAG_PREDICTED if miss[m] <= coast else FLAG_LOST)
-        for b in range(n):
-            if b not in used:
-                labels.append(UNLABELLED)
-                pts.append(uvl[b])
-                areas.append(arl[b])
-                flags.append(0)
+        if len(used) < n:
+            for b in range(n):
+                if b not in used:
+                    labels.append(UNLABELLED)
+                    pts.append(uvl[b])
+                    areas.append(arl[b])
+                    flags.append(0)
+        if arl and (min(arl) < 0 or max(arl) > 65535):
+            areas = [min(max(a, 0), 65535) for a in areas]
         return TrackOutput(np.array(labels, np.uint8), np.array(pts, np.float32).reshape(-1, 2),
-                           np.clip(np.array(areas), 0, 65535).astype(np.uint16), np.array(flags, np.uint8))
+                           np.array(areas).astype(np.uint16), np.array(flags, np.uint8))
 
     @staticmethod
     def _unlabelled(uv: np.ndarray, area: np.ndarray) -> TrackOutput:
