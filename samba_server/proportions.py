@@ -79,6 +79,9 @@ def estimate_lengths(markers: np.ndarray, db_lengths: np.ndarray, straight_perce
     missing = [n for n, v in (("shoulder width", sw), ("shin", shin), ("arm", arm), ("shoulder-knee", reach)) if not np.isfinite(v)]
     if missing:
         raise ProportionError(f"cannot estimate proportions: never seen: {', '.join(missing)}")
+    if not 0.15 <= shin <= 1.0:
+        unit = " (the markers look like millimetres: files are in metres, FORMATS.md)" if 150 <= shin <= 1000 else ""
+        raise ProportionError(f"implausible body: knee-ankle distance {shin:.3g} m{unit}")
     out = db.copy()
     out[L["shoulder_width"]] = sw
     out[L["shin"]] = shin

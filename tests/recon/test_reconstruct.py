@@ -75,7 +75,23 @@ def test_solve_is_deterministic(held_out):
     np.testing.assert_array_equal(a[0], b[0])
 
 
-def test_take_without_enough_body_is_a_clear_error():
+def test_take_without_enough_body_is_a_clear_error(held_out):
     m = np.full((10, 8, 3), np.nan)
     with pytest.raises(ProportionError, match="never seen"):
         estimate_lengths(m, load_default_db().mean_lengths)
+    markers = held_out[4]
+    with pytest.raises(ProportionError, match="millimetres"):
+        estimate_lengths(markers * 1000.0, load_default_db().mean_lengths)
+
+
+def test_single_frame_and_sparse_takes_keep_every_frame(held_out):
+    truth, _lengths, t, db, markers = held_out
+    est, info = reconstruct_take(markers[40:41], t[40:41], db)
+    assert est.shape == (1, 13, 3) and mpjpe(est, truth[40:41]) < 0.08
+    sparse = np.full_like(markers, np.nan)
+    sparse[::30] = markers[::30]           # one frame a second, nothing between
+    est, info = reconstruct_take(sparse, t, db)
+    assert est.shape == truth.shape
+    assert np.all(np.isfinite(est[30::30])) and set(info["status"][30::30]) == {"solved"}
+    assert np.all(np.isfinite(est[32::30])) and set(info["status"][32::30]) == {"bridged"}  # 67 ms away
+    assert np.all(np.isnan(est[15::30])) and set(info["status"][15::30]) == {"unsolved"}    # 0.5 s away
