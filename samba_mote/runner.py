@@ -156,6 +156,10 @@ class MoteRunner:
                     st_t0, st_cpu0, st_f0 = now, sum(os.times()[:2]), st.frames
             else:
                 st.end_reason = "stopped"
+            if st.frames > st_f0:  # a last status, so even a run shorter than status_period reports
+                now = time.monotonic()
+                s = self._status(st_t0, st_cpu0, st_f0, now)
+                self._send("status", encode_status(s), s.t_ns)
         finally:
             if source is not None:
                 source.close()
