@@ -13,6 +13,7 @@ import time
 from dataclasses import dataclass
 from importlib.resources import files
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -151,12 +152,34 @@ class Status:
                 + (" | REC" if snap["recording"] else ""))
 
 
-def attach_viewer(server: Server, http: str, status: Status):
-    """Start the browser viewer on ``http`` ("PORT" or "HOST:PORT") and feed it."""
+def record_toggle(server: Server, folder: str | os.PathLike = ".") -> Callable[[bool], None]:
+    """The viewer's start/stop recording: start writes ``take-YYYYmmdd-HHMMSS.mcap`` in ``folder``
+    (unless a recording runs already), stop closes the current recording."""
+
+    def on_record(start: bool) -> None:
+        if start and server.recorder is None:
+            path = Path(folder) / time.strftime("take-%Y%m%d-%H%M%S.mcap")
+            try:
+                server.set_recorder(Recorder(path, metadata={"tool": "samba-server viewer"}))
+                log.info("recording to %s", path)
+            except RecorderError as exc:
+                log.error("cannot start recording: %s", exc)
+        elif not start:
+            old = server.set_recorder(None)
+            if old is not None:
+                old.close()
+                log.info("recording stopped")
+
+    return on_record
+
+
+def attach_viewer(server: Server, http: str, status: Status, record_dir: str | os.PathLike = "."):
+    """Start the browser viewer on ``http`` ("PORT" or "HOST:PORT") and feed it; its record
+    buttons start and stop recordings in ``record_dir``."""
     from .viewer.server import Viewer
 
     host, _, port = http.rpartition(":")
-    viewer = Viewer(host or "127.0.0.1", int(port))
+    viewer = Viewer(host or "127.0.0.1", int(port), on_record=record_toggle(server, record_dir))
 
     def on_pose(msg) -> None:
         viewer.publish_pose(msg.t_ns / 1e9, msg.joints, msg.markers,
@@ -219,7 +242,8 @@ def run_live(server: Server, args, extra_stop: threading.Event | None = None, on
     try:
         live.start()
         if args.http:
-            viewer = attach_viewer(server, args.http, status)
+            record_dir = Path(args.record).parent if getattr(args, "record", None) else Path(".")
+            viewer = attach_viewer(server, args.http, status, record_dir)
             print(f"viewer: {viewer.url}", file=sys.stderr)
         t_end = time.monotonic() + args.duration if args.duration else None
         while not stop.is_set() and (t_end is None or time.monotonic() < t_end):

@@ -71,3 +71,24 @@ def test_server_cli_errors(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         replay.main([str(tmp_path / "x.mcap"), "--speed", "fast"])
     assert exc.value.code == 2
+
+
+def test_viewer_record_buttons_start_and_stop_a_readable_recording(tmp_path):
+    from samba_common.calib import default_rig
+    from samba_server.record import TakeReader
+    from samba_server.server import Server
+    from samba_server.server_cli import record_toggle
+
+    server = Server(default_rig(2))
+    toggle = record_toggle(server, tmp_path)
+    toggle(True)
+    assert server.recorder is not None
+    first = server.recorder
+    toggle(True)                      # a second start keeps the running recording
+    assert server.recorder is first
+    toggle(False)
+    assert server.recorder is None
+    takes = list(tmp_path.glob("take-*.mcap"))
+    assert len(takes) == 1
+    assert any(m.topic == "/calibration" or "calib" in m.topic for m in TakeReader(takes[0]))
+    toggle(False)                     # stopping when nothing records is harmless
