@@ -25,9 +25,9 @@ from _record import record  # noqa: E402
 from samba_common.body import prepend_standard_pose  # noqa: E402
 from samba_common.bvh import load_bvh, resample  # noqa: E402
 from samba_common.skeleton import BONE_TYPES, UNOBSERVED_JOINTS  # noqa: E402
-from samba_server.db import build_db  # noqa: E402
-from samba_server.evaluate import bone_report, mpjpe, observe, vary_body  # noqa: E402
-from samba_server.reconstruct import ReconstructConfig, reconstruct_take  # noqa: E402
+from samba_server.recon.db import build_db  # noqa: E402
+from samba_server.recon.evaluate import bone_report, mpjpe, observe, vary_body  # noqa: E402
+from samba_server.recon.reconstruct import ReconstructConfig, reconstruct_take  # noqa: E402
 
 
 def _descriptions(index: Path) -> dict[str, str]:

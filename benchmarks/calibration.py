@@ -128,7 +128,7 @@ def bench_selfcal() -> list[str]:
 
 def bench_reconstruction(rig: CameraRig, world: CameraRig, est: CameraRig, seconds: float) -> list[str]:
     try:
-        from samba_server.reconstruct import reconstruct_take
+        from samba_server.recon import reconstruct_take
     except ImportError as exc:  # pragma: no cover - depends on the lead's module
         return [f"- reconstruction comparison skipped ({exc})"]
     from samba_common.body import prepend_standard_pose

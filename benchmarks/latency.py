@@ -31,7 +31,7 @@ import numpy as np
 from samba_common.calib import default_rig
 from samba_server.live import LiveServer
 from samba_server.server import Server, ServerConfig
-from samba_server.server_cli import load_server_configs, make_reconstructor
+from samba_server.app import load_server_configs, make_reconstructor
 from samba_server.sync import SyncConfig
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -81,7 +81,7 @@ def scaled_config(scale: int) -> MoteConfig:
 
 def measure(scale: int, seconds: float, repeats: int) -> dict[str, float]:
     rig = scaled_rig(scale)
-    take = make_take("unused", None, rig=rig, config=SimConfig(blur=0.45 * scale), seconds=seconds, write=False)
+    take = make_take("unused", None, rig=rig, config=SimConfig(blur=0.45 * scale, tpose_stance="apart", pose_at=None), seconds=seconds, write=False)
     cam = take.cameras[0]
     frames = list(cam.frames)
     cfg = scaled_config(scale)

@@ -29,10 +29,10 @@ from _record import record  # noqa: E402
 
 from samba_common.body import prepend_standard_pose  # noqa: E402
 from samba_common.bvh import load_bvh, resample  # noqa: E402
-from samba_server.db import load_default_db  # noqa: E402
-from samba_server.evaluate import observe, vary_body  # noqa: E402
-from samba_server.proportions import estimate_lengths  # noqa: E402
-from samba_server.reconstruct import ReconstructConfig, Reconstructor  # noqa: E402
+from samba_server.recon.db import load_default_db  # noqa: E402
+from samba_server.recon.evaluate import observe, vary_body  # noqa: E402
+from samba_server.recon.proportions import estimate_lengths  # noqa: E402
+from samba_server.recon.reconstruct import ReconstructConfig, Reconstructor  # noqa: E402
 
 CLIPS = ("002_05", "005_02", "006_10")  # punch, dance, basketball
 

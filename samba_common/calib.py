@@ -3,7 +3,9 @@
 Conventions: world frame Z up, metres. A camera maps a world point ``X`` (3,) to camera
 coordinates ``x_cam = R @ X + t`` (OpenCV: x right, y down, z forward), then to pixels with
 the OpenCV pinhole + distortion model (``k1, k2, p1, p2, k3``). Pure numpy: neither cv2 nor
-scipy is needed (the mote imports this module).
+scipy is needed (the mote imports this module). A file's translations may be in other units
+(``[metadata] units = "mm"`` or ``"cm"``, anipose's board units): they are metres once loaded,
+and files are always written in metres.
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ log = logging.getLogger(__name__)
 __all__ = [
     "CalibrationError",
     "Camera",
+    "UNITS_TO_METRES",
     "CameraRig",
     "default_rig",
     "look_at",
@@ -296,6 +299,12 @@ class Camera:
 
 # --------------------------------------------------------------------------- rig
 
+#: ``[metadata] units`` of calibration.toml -> metres per unit (translations are scaled on load)
+UNITS_TO_METRES = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+#: a camera farther than this from the origin (metres) in a file without ``units`` is suspect
+_FAR_CAMERA_M = 100.0
+
 
 def _fmt_float(x: float) -> str:
     """TOML float literal that parses back to exactly ``x`` (shortest repr)."""
@@ -386,7 +395,8 @@ class CameraRig:
             lines.append(f"[cam_{i}]")
             lines += [f"{k} = {_fmt_value(v)}" for k, v in d.items()]
             lines.append("")
-        meta = {"units": "m", **self.metadata}
+        # translations are metres in memory, whatever units the file was loaded from
+        meta = {"units": "m", **{k: v for k, v in self.metadata.items() if k != "units"}}
         lines.append("[metadata]")
         for k, v in meta.items():
             if isinstance(v, dict):
@@ -404,7 +414,13 @@ class CameraRig:
 
     @classmethod
     def loads(cls, text: str | bytes, path: str | os.PathLike | None = None) -> "CameraRig":
-        """Parse calibration.toml text; ``path`` only names the source in errors."""
+        """Parse calibration.toml text; ``path`` only names the source in errors.
+
+        ``[metadata] units`` ("m", "cm" or "mm"; "m" when absent) is the unit of the
+        translations, as with anipose, whose translations are in the board's units: they are
+        scaled to metres and the loaded rig's ``metadata["units"]`` is "m". Other units are a
+        CalibrationError naming the file and ``metadata.units``.
+        """
         if isinstance(text, bytes):
             try:
                 text = text.decode("utf-8")
@@ -414,6 +430,13 @@ class CameraRig:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             raise CalibrationError(path, None, f"invalid TOML ({exc})") from None
+        meta = data.get("metadata", {})
+        meta = dict(meta) if isinstance(meta, dict) else {}
+        units = meta.get("units", "m")
+        scale = UNITS_TO_METRES.get(units) if isinstance(units, str) else None
+        if scale is None:
+            raise CalibrationError(path, "metadata.units", f"unknown units {units!r}: expected one of "
+                                   f"{', '.join(repr(u) for u in UNITS_TO_METRES)} (the unit of the translations)")
         keys = [k for k in data if k.startswith("cam_")]
         other = [k for k in data if k not in keys and k != "metadata"]
         if other:
@@ -432,8 +455,17 @@ class CameraRig:
             if c.name in seen:
                 raise CalibrationError(path, f"{k}.name", f"duplicate camera name {c.name!r} (also in {seen[c.name]})")
             seen[c.name] = k
-        meta = data.get("metadata", {})
-        return cls(cams, dict(meta) if isinstance(meta, dict) else {})
+        if scale != 1.0:
+            for c in cams:
+                c.tvec = c.tvec * scale
+            log.info("%s: translations converted from %s to metres", path or "<calibration>", units)
+        elif "units" not in meta:
+            far = max(float(np.linalg.norm(c.center)) for c in cams)
+            if far > _FAR_CAMERA_M:
+                log.warning('%s: a camera is %.0f m from the origin; if the translations are in '
+                            'millimetres, add units = "mm" to [metadata]', path or "<calibration>", far)
+        meta["units"] = "m"
+        return cls(cams, meta)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "CameraRig":

@@ -1,11 +1,11 @@
 """Pose wire format: what the server publishes on ``samba/{session}/pose`` (binary) and
 ``samba/{session}/pose/json`` (JSON), and records on the ``/pose`` MCAP channel.
 
-Binary, version 1, little endian::
+Binary, version 2, little endian::
 
-    header "<4sBBHIqffBBH" (32 bytes)
+    header "<4sBBHIqffBBHfBB" (38 bytes)
         magic       4s  b"SMBP"
-        version     B   1
+        version     B   2 (version 1, without the last three fields, is still read)
         flags       B   FLAG_* bit set
         n_joints    H   13 (JOINT_NAMES order)
         seq         I   pose counter (wraps at 2**32)
@@ -15,6 +15,10 @@ Binary, version 1, little endian::
         n_markers   B   markers used by the solver (triangulated this frame)
         n_views     B   motes that contributed a packet to the frame
         marker_mask H   bit i set = marker i (MARKER_NAMES order) triangulated
+        margin_m    f   label margin, metres: how much worse the runner-up naming of the
+                        least sure marker was (NaN when no marker was named)
+        label_mode  B   LABEL_MODES index: 0 lost, 1 tracking, 2 identified (named from scratch)
+        reserved    B   0
     joints   n_joints x 3 float32, world metres Z up; NaN when unsolved
     markers  8 x 3 float32 triangulated markers (NaN = missing), only if FLAG_MARKERS
 
@@ -22,7 +26,8 @@ JSON variant (UTF-8, one object; NaN becomes ``null``)::
 
     {"type": "samba.pose", "version": 1, "seq": 12, "t_ns": 1700000000123456789,
      "t": 1700000000.1234568, "latency_ms": 2.1, "residual_m": 0.004, "n_markers": 8,
-     "n_views": 4, "marker_mask": 255, "flags": ["solved"], "joint_names": [...13 names...],
+     "n_views": 4, "marker_mask": 255, "label_margin_m": 0.08, "label_mode": "tracking",
+     "flags": ["solved"], "joint_names": [...13 names...],
      "joints": [[x, y, z], ...13 rows..., or null rows], "markers": [[x, y, z] | null, ...8]}
 """
 
@@ -38,15 +43,18 @@ import numpy as np
 from .skeleton import JOINT_NAMES, N_JOINTS, N_MARKERS
 
 MAGIC = b"SMBP"
-VERSION = 1
-HEADER = struct.Struct("<4sBBHIqffBBH")
+VERSION = 2
+HEADER = struct.Struct("<4sBBHIqffBBHfBB")
+HEADER_V1 = struct.Struct("<4sBBHIqffBBH")
+#: label_mode values, by index
+LABEL_MODES = ("lost", "tracking", "identified")
 
 FLAG_SOLVED = 0x01  #: joints hold a solution
 FLAG_MARKERS = 0x02  #: the triangulated markers follow the joints
 FLAG_INCOMPLETE = 0x04  #: at least one live mote had no packet in this frame
-FLAG_SWAP_REPAIRED = 0x08  #: a label swap of one mote was detected and repaired
+FLAG_LABEL_OVERRIDDEN = 0x08  #: the 3D labelling named a blob otherwise than its mote did
 FLAG_NAMES = {FLAG_SOLVED: "solved", FLAG_MARKERS: "markers", FLAG_INCOMPLETE: "incomplete",
-              FLAG_SWAP_REPAIRED: "swap_repaired"}
+              FLAG_LABEL_OVERRIDDEN: "label_overridden"}
 
 
 class PoseError(ValueError):
@@ -70,6 +78,8 @@ class PoseMessage:
     flags: int = 0
     markers: np.ndarray | None = None
     marker_mask: int = 0
+    label_margin_m: float = float("nan")
+    label_mode: str = "lost"
     extra: dict = field(default_factory=dict)
 
     @property
@@ -93,7 +103,8 @@ def encode_pose(m: PoseMessage) -> bytes:
     try:
         head = HEADER.pack(MAGIC, VERSION, flags, N_JOINTS, m.seq & 0xFFFFFFFF, int(m.t_ns),
                            float(m.latency_ms), float(m.residual_m), min(int(m.n_markers), 255),
-                           min(int(m.n_views), 255), int(m.marker_mask) & 0xFFFF)
+                           min(int(m.n_views), 255), int(m.marker_mask) & 0xFFFF, float(m.label_margin_m),
+                           LABEL_MODES.index(m.label_mode) if m.label_mode in LABEL_MODES else 0, 0)
     except struct.error as exc:
         raise PoseError(f"pose field out of range: {exc}") from None
     return head + joints.tobytes() + tail
@@ -102,24 +113,30 @@ def encode_pose(m: PoseMessage) -> bytes:
 def decode_pose(buf: bytes | bytearray | memoryview) -> PoseMessage:
     """Parse a binary pose; raise PoseError on truncated or foreign input."""
     buf = bytes(buf)
-    if len(buf) < HEADER.size:
-        raise PoseError(f"truncated pose: {len(buf)} bytes < header {HEADER.size}")
-    magic, ver, flags, nj, seq, t_ns, lat, res, nm, nv, mask = HEADER.unpack_from(buf)
+    if len(buf) < HEADER_V1.size:
+        raise PoseError(f"truncated pose: {len(buf)} bytes < header {HEADER_V1.size}")
+    magic, ver, flags, nj, seq, t_ns, lat, res, nm, nv, mask = HEADER_V1.unpack_from(buf)
     if magic != MAGIC:
         raise PoseError(f"bad magic {magic!r} (expected {MAGIC!r})")
-    if ver != VERSION:
-        raise PoseError(f"unsupported pose version {ver} (this build reads {VERSION})")
+    if ver not in (1, VERSION):
+        raise PoseError(f"unsupported pose version {ver} (this build reads 1 and {VERSION})")
+    margin, mode, head = float("nan"), "lost", HEADER_V1
+    if ver == VERSION:
+        if len(buf) < HEADER.size:
+            raise PoseError(f"truncated pose: {len(buf)} bytes < header {HEADER.size}")
+        margin, mode_i = HEADER.unpack_from(buf)[11:13]
+        mode, head = LABEL_MODES[mode_i] if mode_i < len(LABEL_MODES) else "lost", HEADER
     if nj != N_JOINTS:
         raise PoseError(f"pose has {nj} joints, expected {N_JOINTS}")
-    expected = HEADER.size + nj * 12 + (N_MARKERS * 12 if flags & FLAG_MARKERS else 0)
+    expected = head.size + nj * 12 + (N_MARKERS * 12 if flags & FLAG_MARKERS else 0)
     if len(buf) != expected:
         raise PoseError(f"pose is {len(buf)} bytes, header says {expected}")
-    joints = np.frombuffer(buf, "<f4", count=nj * 3, offset=HEADER.size).reshape(nj, 3).astype(np.float64)
+    joints = np.frombuffer(buf, "<f4", count=nj * 3, offset=head.size).reshape(nj, 3).astype(np.float64)
     markers = None
     if flags & FLAG_MARKERS:
-        markers = np.frombuffer(buf, "<f4", count=N_MARKERS * 3, offset=HEADER.size + nj * 12)
+        markers = np.frombuffer(buf, "<f4", count=N_MARKERS * 3, offset=head.size + nj * 12)
         markers = markers.reshape(N_MARKERS, 3).astype(np.float64)
-    return PoseMessage(seq, t_ns, joints, lat, res, nm, nv, flags, markers, mask)
+    return PoseMessage(seq, t_ns, joints, lat, res, nm, nv, flags, markers, mask, float(margin), mode)
 
 
 def _rows(a: np.ndarray | None) -> list | None:
@@ -138,6 +155,7 @@ def pose_to_json(m: PoseMessage) -> bytes:
         "type": "samba.pose", "version": VERSION, "seq": int(m.seq), "t_ns": int(m.t_ns),
         "t": m.t_ns / 1e9, "latency_ms": _num(m.latency_ms, 3), "residual_m": _num(m.residual_m, 6),
         "n_markers": int(m.n_markers), "n_views": int(m.n_views), "marker_mask": int(m.marker_mask),
+        "label_margin_m": _num(m.label_margin_m, 4), "label_mode": m.label_mode,
         "flags": [name for bit, name in FLAG_NAMES.items() if m.flags & bit and bit != FLAG_MARKERS],
         "joint_names": list(JOINT_NAMES), "joints": _rows(m.joints), "markers": _rows(m.markers),
     }
@@ -173,6 +191,8 @@ def pose_from_json(buf: bytes | str) -> PoseMessage:
                            nan if d.get("latency_ms") is None else float(d["latency_ms"]),
                            nan if d.get("residual_m") is None else float(d["residual_m"]),
                            int(d.get("n_markers", 0)), int(d.get("n_views", 0)), flags, markers,
-                           int(d.get("marker_mask", 0)))
+                           int(d.get("marker_mask", 0)),
+                           nan if d.get("label_margin_m") is None else float(d["label_margin_m"]),
+                           str(d.get("label_mode", "lost")))
     except (KeyError, TypeError, ValueError) as exc:
         raise PoseError(f"pose JSON malformed: {exc}") from None

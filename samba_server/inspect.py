@@ -1,10 +1,8 @@
-"""``samba-inspect take.mcap``: what is in a take (motes, frames, drops, rates, duration) and
-export of its recorded poses (joints.npz / CSV / plot)."""
+"""What is in a take (motes, frames, drops, rates, duration) and its recorded poses as arrays;
+the command line is ``samba-inspect`` (:mod:`samba_server.cli.inspect`)."""
 
 from __future__ import annotations
 
-import argparse
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,7 +11,6 @@ import numpy as np
 from samba_common.pose_wire import PoseError, decode_pose
 from samba_common.wire import PacketError, decode_packet
 
-from .export.csvfile import write_joints_csv
 from .record import CALIBRATION_TOPIC, EVENTS_TOPIC, POSE_TOPIC, TakeReader
 
 
@@ -114,42 +111,3 @@ def pose_arrays(s: TakeSummary) -> tuple[np.ndarray, np.ndarray, dict]:
     return joints, t, {"markers": markers, "residual": np.array([p.residual_m for p in s.poses]),
                        "latency_ms": np.array([p.latency_ms for p in s.poses]),
                        "t_ns": np.array([p.t_ns for p in s.poses], dtype=np.int64)}
-
-
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="samba-inspect", description="Summarise a recorded take and export its poses.")
-    ap.add_argument("take", help="take.mcap")
-    ap.add_argument("--export", metavar="JOINTS.npz", help="write the recorded poses as joints.npz")
-    ap.add_argument("--csv", metavar="OUT.csv", help="write the recorded poses as CSV")
-    ap.add_argument("--plot", metavar="OUT.png",
-                    help="plot marker visibility per mote, joint trajectories and latency over time")
-    args = ap.parse_args(argv)
-    try:
-        s = summarize(args.take)
-    except (OSError, ValueError) as exc:
-        print(f"samba-inspect: {exc}", file=sys.stderr)
-        return 1
-    print(report(s))
-    joints, t, extra = pose_arrays(s)
-    try:
-        if args.export:
-            from samba_common.formats import save_joints
-
-            save_joints(args.export, joints, t, **extra)
-            print(f"wrote {args.export} ({len(t)} frames)")
-        if args.csv:
-            write_joints_csv(args.csv, joints, t)
-            print(f"wrote {args.csv} ({len(t)} frames)")
-        if args.plot:
-            from .plots import plot_take
-
-            plot_take(args.take, args.plot)  # all panels: visibility per mote, trajectories, latency
-            print(f"wrote {args.plot}")
-    except (OSError, ValueError) as exc:
-        print(f"samba-inspect: {exc}", file=sys.stderr)
-        return 1
-    return 0
-
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

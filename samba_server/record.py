@@ -1,37 +1,44 @@
 """MCAP take recorder and a reader that tolerates a truncated tail.
 
-Layout of a Samba take (``*.mcap``, profile ``samba``):
+Layout of a Samba take (``*.mcap``, profile ``samba``): chunked (uncompressed chunks), with
+message indexes, a summary (schemas, channels, statistics, chunk indexes) and summary offsets,
+so indexed readers (``mcap`` Python ``make_reader``, ``@mcap/core`` ``McapIndexedReader``,
+Foxglove) open a closed take directly. Every channel has a schema record:
 
-================================  ======================  ===================================
-topic                             message encoding        payload
-================================  ======================  ===================================
-``/mote/{id}/markers``            ``samba-marker-v1``     raw marker packet bytes as received
-                                                          (``samba_common.wire``), one channel
-                                                          per mote, ``metadata["mote_id"]``
-``/calibration``                  ``toml``                calibration.toml bytes
-``/pose``                         ``samba-pose-v1``       binary pose (``samba_common.pose_wire``)
-``/events``                       ``json``                mote joins/leaves (liveliness)
-================================  ======================  ===================================
+- ``/mote/{id}/markers``: message encoding ``samba-marker-v1``, schema ``samba.MarkerPacket``
+  (``text/plain``): raw marker packet bytes as received (``samba_common.wire``)
+- ``/calibration``: ``toml``, schema ``samba.CalibrationToml`` (``text/plain``): calibration.toml
+- ``/pose``: ``samba-pose-v1``, schema ``samba.Pose`` (``text/plain``): binary pose
+  (``samba_common.pose_wire``)
+- ``/events``: ``json``, schema ``samba.Event`` (``jsonschema``): mote joins/leaves
 
-``log_time`` is the server's arrival time (ns since the Unix epoch) and ``publish_time`` the
-capture time when known. Messages appear in the file in arrival order, which is the order the
-server processed them: replay feeds them back in the same order.
+The ``text/plain`` schemas of the binary channels hold the byte layout (the wire modules'
+documentation) for a third party to write a decoder; ``/events`` is decoded by any JSON-aware
+tool. One channel per mote, ``metadata["mote_id"]``. ``log_time`` is the server's arrival time
+(ns since the Unix epoch) and ``publish_time`` the capture time when known. Messages appear in
+the file in arrival order, which is the order the server processed them: replay feeds them
+back in the same order.
 
-Crash safety: the file is written *unchunked* and every record goes to the operating system
-with one ``os.write`` as soon as it is added, so a killed process (even ``kill -9``) leaves
-every message it had recorded on disk; only the closing summary is missing, and
-:func:`iter_messages` reads such a file up to its last complete record. A failing write
-(full disk, I/O error) is rolled back to the last complete record, logged once, and counted
-in :attr:`Recorder.dropped`; recording resumes by itself when writes succeed again.
+Crash safety: a chunk is closed and written at least every :data:`FLUSH_INTERVAL_S` (0.5 s,
+a timer thread covers pauses in the message flow), each chunk with its message indexes in one
+``os.write``, so a killed process (even ``kill -9``) leaves on disk every message recorded more
+than about 0.6 s before it died; only the summary is missing, and :func:`iter_messages` reads
+such a file by a linear scan up to its last complete chunk. A failing write (full disk, I/O
+error) is rolled back to the last complete chunk and logged; the unwritten bytes are kept in
+memory (up to ``max_pending_bytes``) and written as soon as the disk accepts them, messages
+arriving while that backlog is full are dropped and counted in ``stats.dropped``.
 """
 
 from __future__ import annotations
 
 import errno
+import json
 import logging
 import os
 import struct
+import sys
 import threading
+import time
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,7 +46,7 @@ from pathlib import Path
 from mcap.exceptions import McapError
 from mcap.records import Channel, Footer, Message, Schema
 from mcap.stream_reader import StreamReader
-from mcap.writer import Writer
+from mcap.writer import CompressionType, Writer
 
 log = logging.getLogger(__name__)
 
@@ -50,10 +57,80 @@ CALIBRATION_TOPIC = "/calibration"
 POSE_TOPIC = "/pose"
 EVENTS_TOPIC = "/events"
 
+#: a chunk is closed and written at least this often (seconds) while messages come in
+FLUSH_INTERVAL_S = 0.5
+#: upper bound of one chunk (bytes); at Samba's data rates the time limit comes first
+CHUNK_BYTES = 1 << 20
+#: unwritten bytes kept while the disk refuses writes; beyond, new messages are dropped
+MAX_PENDING_BYTES = 64 << 20
+
 
 def markers_topic(mote_id: str) -> str:
     """MCAP topic of one mote's raw marker packets."""
     return f"/mote/{mote_id}/markers"
+
+
+# ---------------------------------------------------------------------- schemas
+
+
+def _layout_doc(module: str, fallback: str) -> bytes:
+    import importlib
+
+    doc = importlib.import_module(module).__doc__  # None under python -OO
+    return (doc or fallback).strip().encode("utf-8") + b"\n"
+
+
+EVENT_JSONSCHEMA = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "title": "samba.Event",
+    "description": "A mote joined or left the session (Zenoh liveliness), as seen by the server.",
+    "type": "object",
+    "properties": {
+        "mote_id": {"type": "string", "description": "the mote (camera) id"},
+        "event": {"type": "string", "enum": ["join", "leave"]},
+        "t_ns": {"type": "integer", "description": "server time, ns since the Unix epoch"},
+    },
+    "required": ["mote_id", "event", "t_ns"],
+}
+
+
+def _constants(module: str) -> bytes:
+    """Numeric values a decoder needs, listed from the code (flags, names in index order)."""
+    from samba_common import pose_wire, wire
+    from samba_common.skeleton import JOINT_NAMES, MARKER_NAMES
+
+    lines = ["", "Values:"]
+    if module == "pose_wire":
+        lines.append("  flags: " + ", ".join(f"{n}=0x{b:02x}" for b, n in pose_wire.FLAG_NAMES.items()))
+        lines.append("  label_mode: " + ", ".join(f"{i}={n}" for i, n in enumerate(pose_wire.LABEL_MODES)))
+        lines.append("  joints (index order): " + ", ".join(JOINT_NAMES))
+    else:
+        lines.append("  flags: " + ", ".join(f"{n}=0x{b:02x}" for b, n in wire.FLAG_NAMES.items()))
+        lines.append(f"  label: index into the markers below, {wire.UNLABELLED} = unlabelled")
+    lines.append("  markers (index order): " + ", ".join(MARKER_NAMES))
+    return ("\n".join(lines) + "\n").encode()
+
+
+def schema_for(topic: str) -> tuple[str, str, bytes]:
+    """(name, encoding, data) of the schema record of ``topic``'s channel."""
+    if topic == POSE_TOPIC:
+        return ("samba.Pose", "text/plain",
+                b"Message encoding samba-pose-v1: one binary pose per message, as below.\n\n"
+                + _layout_doc("samba_common.pose_wire", "Binary pose: see samba_common/pose_wire.py.")
+                + _constants("pose_wire"))
+    if topic == EVENTS_TOPIC:
+        return "samba.Event", "jsonschema", json.dumps(EVENT_JSONSCHEMA, indent=1).encode()
+    if topic == CALIBRATION_TOPIC:
+        return ("samba.CalibrationToml", "text/plain",
+                b"Message encoding toml: the calibration.toml in use, UTF-8 TOML, anipose layout: "
+                b"one [cam_N] table per camera with name, size [w, h] px, matrix (3x3 K), "
+                b"distortions [k1, k2, p1, p2, k3], rotation (Rodrigues, world -> camera), "
+                b"translation (x_cam = R x_world + t, in [metadata] units: \"m\" (default), \"cm\" or \"mm\").\n")
+    return ("samba.MarkerPacket", "text/plain",
+            b"Message encoding samba-marker-v1: one binary marker packet of one mote per message, "
+            b"as the mote sent it; layout below.\n\n"
+            + _layout_doc("samba_common.wire", "Binary marker packet: see samba_common/wire.py.")
+            + _constants("wire"))
 
 
 class RecorderError(OSError):
@@ -61,7 +138,7 @@ class RecorderError(OSError):
 
 
 class _SafeSink:
-    """Write-through file sink for the MCAP writer.
+    """Write-through file sink.
 
     Each ``write`` goes straight to the kernel. On failure the file is truncated back to
     the last complete write and the error is re-raised, so the file never holds a partial
@@ -97,13 +174,41 @@ class _SafeSink:
         pass
 
 
+class _Spool:
+    """The stream the MCAP writer writes to: bytes wait here until :meth:`commit` hands them
+    to the sink in one write. ``tell()`` is the file offset they will have, so the writer's
+    indexes stay right even while a full disk holds them back."""
+
+    def __init__(self, sink: _SafeSink):
+        self.sink = sink
+        self.buf = bytearray()
+
+    def write(self, data: bytes) -> int:
+        self.buf += data
+        return len(data)
+
+    def tell(self) -> int:
+        return self.sink.tell() + len(self.buf)
+
+    def flush(self) -> None:
+        pass
+
+    def commit(self) -> None:
+        """Write everything pending; on OSError the file is unchanged and the bytes stay."""
+        if self.buf:
+            self.sink.write(bytes(self.buf))
+            self.buf.clear()
+
+
 @dataclass
 class RecorderStats:
-    """Counters of a recorder: messages written and dropped (write failures), bytes."""
+    """Counters of a recorder: messages accepted (``written``; on disk once flushed) and
+    dropped, bytes on disk, messages not yet on disk (``pending``), last write error."""
 
     written: int = 0
     dropped: int = 0
     bytes: int = 0
+    pending: int = 0
     last_error: str = ""
 
 
@@ -111,29 +216,45 @@ class Recorder:
     """Record raw mote packets, the calibration, poses and events into one MCAP file.
 
     Thread-safe: the ingest thread records packets while the processing loop records poses.
+    A daemon thread writes the open chunk every :data:`FLUSH_INTERVAL_S`; :meth:`flush` does
+    it on demand, :meth:`close` writes the summary.
     """
 
     def __init__(self, path: str | os.PathLike, calibration_toml: bytes | None = None,
-                 metadata: dict[str, str] | None = None, _sink: _SafeSink | None = None):
+                 metadata: dict[str, str] | None = None, _sink: _SafeSink | None = None,
+                 flush_interval_s: float = FLUSH_INTERVAL_S, max_pending_bytes: int = MAX_PENDING_BYTES):
         self.path = Path(path)
         self.stats = RecorderStats()
+        self.flush_interval_s = float(flush_interval_s)
+        self.max_pending_bytes = int(max_pending_bytes)
         self._lock = threading.Lock()
         self._channels: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
         self._closed = False
+        self._open = 0  # messages in the open chunk
+        self._spooled = 0  # messages in closed chunks not yet on disk
+        self._last_flush = time.monotonic()
         try:
             fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         except OSError as exc:
             raise RecorderError(exc.errno, f"cannot create take file {self.path}: {exc.strerror}") from None
         self._fd = fd
         self._sink = _sink or _SafeSink(fd)
-        self._writer = Writer(self._sink, use_chunking=False, enable_crcs=True)  # type: ignore[arg-type]
+        self._spool = _Spool(self._sink)
+        self._writer = Writer(self._spool, chunk_size=CHUNK_BYTES,  # type: ignore[arg-type]
+                              compression=CompressionType.NONE, use_chunking=True, enable_crcs=True)
         try:
             self._writer.start(profile=PROFILE, library="samba")
             if metadata:
                 self._writer.add_metadata("samba", {str(k): str(v) for k, v in metadata.items()})
+            self._spool.commit()
         except OSError as exc:
             os.close(fd)
             raise RecorderError(exc.errno, f"cannot write take file {self.path}: {exc.strerror}") from None
+        self._stop = threading.Event()
+        self._flusher = threading.Thread(target=self._flush_loop, name=f"recorder-flush {self.path.name}",
+                                         daemon=True)
+        self._flusher.start()
         if calibration_toml is not None:
             self.write_calibration(calibration_toml)
 
@@ -141,10 +262,42 @@ class Recorder:
     def _channel(self, topic: str, encoding: str, metadata: dict[str, str]) -> int:
         ch = self._channels.get(topic)
         if ch is None:
-            ch = self._writer.register_channel(topic=topic, message_encoding=encoding, schema_id=0,
+            name, schema_encoding, data = schema_for(topic)
+            sid = self._schemas.get(name)
+            if sid is None:
+                sid = self._schemas[name] = self._writer.register_schema(name, schema_encoding, data)
+            ch = self._writer.register_channel(topic=topic, message_encoding=encoding, schema_id=sid,
                                                metadata=metadata)
             self._channels[topic] = ch
         return ch
+
+    def _write_out(self) -> bool:
+        """(lock held) Close the open chunk and write all pending bytes; False if the disk refused."""
+        self._last_flush = time.monotonic()
+        flush = getattr(self._writer, "flush", None)
+        if flush is not None:
+            flush()
+        else:  # pragma: no cover - mcap < 1.6 has no public Writer.flush
+            self._writer._Writer__finalize_chunk()  # type: ignore[attr-defined]
+        self._spooled += self._open
+        self._open = 0
+        try:
+            self._spool.commit()
+        except OSError as exc:
+            msg = "disk full" if exc.errno == errno.ENOSPC else f"{exc.strerror or exc}"
+            if msg != self.stats.last_error:
+                log.error("recording to %s failed (%s): %d message(s) held in memory, retrying every %.1f s",
+                          self.path, msg, self._spooled, self.flush_interval_s)
+            self.stats.last_error = msg
+            self.stats.pending = self._spooled
+            return False
+        self._spooled = self.stats.pending = 0
+        self.stats.bytes = self._sink.tell()
+        if self.stats.last_error:
+            log.warning("recording to %s resumed (%d message(s) dropped meanwhile)", self.path,
+                        self.stats.dropped)
+            self.stats.last_error = ""
+        return True
 
     def _add(self, topic: str, encoding: str, metadata: dict[str, str], data: bytes, log_time: int,
              publish_time: int, sequence: int) -> bool:
@@ -152,34 +305,42 @@ class Recorder:
             if self._closed:
                 self.stats.dropped += 1
                 return False
-            new_channel = topic not in self._channels
-            try:
-                ch = self._channel(topic, encoding, metadata)
-                self._writer.add_message(channel_id=ch, log_time=int(log_time), data=bytes(data),
-                                         publish_time=int(publish_time), sequence=int(sequence) & 0xFFFFFFFF)
-            except OSError as exc:
-                if new_channel:  # its Channel record went down with the failed write
-                    self._channels.pop(topic, None)
-                self.stats.dropped += 1
-                msg = f"{exc.strerror or exc}"
-                if exc.errno == errno.ENOSPC:
-                    msg = "disk full"
-                if msg != self.stats.last_error:
-                    log.error("recording to %s failed (%s): message dropped, will retry on the next one",
-                              self.path, msg)
-                self.stats.last_error = msg
-                return False
+            if len(self._spool.buf) > self.max_pending_bytes:  # the disk refuses writes, backlog full
+                if time.monotonic() - self._last_flush >= self.flush_interval_s:
+                    self._write_out()  # retry (at most once per interval)
+                if len(self._spool.buf) > self.max_pending_bytes:
+                    self.stats.dropped += 1
+                    return False
+            ch = self._channel(topic, encoding, metadata)
+            self._writer.add_message(channel_id=ch, log_time=int(log_time), data=bytes(data),
+                                     publish_time=int(publish_time), sequence=int(sequence) & 0xFFFFFFFF)
             self.stats.written += 1
-            self.stats.bytes = self._sink.tell()
-            if self.stats.last_error:
-                log.warning("recording to %s resumed after %d dropped message(s)", self.path,
-                            self.stats.dropped)
-                self.stats.last_error = ""
+            self._open += 1
+            self.stats.pending = self._open + self._spooled
+            if time.monotonic() - self._last_flush >= self.flush_interval_s or (
+                    self._spool.buf and not self.stats.last_error):  # due, or the writer closed a full chunk
+                self._write_out()  # while the disk refuses writes: one attempt per interval
             return True
+
+    def _flush_loop(self) -> None:
+        period = max(self.flush_interval_s / 5, 0.01)
+        while not self._stop.wait(period):
+            with self._lock:
+                if self._closed:
+                    return
+                if (self._open or self._spool.buf) and time.monotonic() - self._last_flush >= self.flush_interval_s:
+                    self._write_out()
+
+    def flush(self) -> bool:
+        """Write the open chunk now; False if the disk refused (the data stays pending)."""
+        with self._lock:
+            if self._closed:
+                return True
+            return self._write_out()
 
     def write_packet(self, mote_id: str, payload: bytes, arrival_ns: int, capture_ns: int = 0,
                      seq: int = 0) -> bool:
-        """Record one raw marker packet of ``mote_id``; False (and a counted drop) on failure."""
+        """Record one raw marker packet of ``mote_id``; False (and a counted drop) if it cannot be."""
         return self._add(markers_topic(mote_id), MARKERS_ENCODING, {"mote_id": mote_id}, payload,
                          arrival_ns, capture_ns or arrival_ns, seq)
 
@@ -196,18 +357,33 @@ class Recorder:
         return self._add(EVENTS_TOPIC, "json", {}, payload, t_ns, t_ns, 0)
 
     def close(self) -> None:
-        """Write the MCAP summary and close the file (idempotent)."""
+        """Write the last chunk and the MCAP summary, close the file (idempotent)."""
         with self._lock:
             if self._closed:
                 return
             self._closed = True
+            self._stop.set()
+            data_ok = self._write_out()  # the last chunk first: it matters more than the summary
             try:
                 self._writer.finish()
+                self._spool.commit()
             except OSError as exc:
-                log.error("could not finish %s (%s): the file stays readable without its summary",
-                          self.path, exc.strerror or exc)
+                lost = self._spooled
+                self.stats.dropped += lost
+                self.stats.written -= lost
+                self.stats.last_error = exc.strerror or str(exc)
+                log.error("could not finish %s (%s): %s; the file stays readable without its summary",
+                          self.path, exc.strerror or exc,
+                          "summary not written" if data_ok else f"{lost} message(s) lost")
             finally:
+                self._spooled = self.stats.pending = 0
+                self.stats.bytes = self._sink.tell()
                 os.close(self._fd)
+        if self._flusher is not threading.current_thread():
+            self._flusher.join(timeout=5)
+        print(f"wrote {self.path}: {self.stats.written} messages, {self.stats.bytes / 1e6:.1f} MB"
+              + (f", {self.stats.dropped} dropped ({self.stats.last_error})" if self.stats.dropped else ""),
+              file=sys.stderr)
 
     def __enter__(self) -> "Recorder":
         return self

@@ -1,4 +1,4 @@
-"""The Samba server core: ingest -> sync -> triangulate (+ swap repair) -> solve -> publish.
+"""The Samba server core: ingest -> sync -> label (3D points named as markers) -> solve -> publish.
 
 :class:`Server` has no network code. Transports call :meth:`Server.ingest` (thread-safe; it
 stamps the arrival time, records the raw packet and queues it) and
@@ -22,13 +22,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from samba_common.calib import CameraRig
-from samba_common.pose_wire import FLAG_INCOMPLETE, FLAG_SOLVED, FLAG_SWAP_REPAIRED, PoseMessage, encode_pose
+from samba_common.pose_wire import FLAG_INCOMPLETE, FLAG_LABEL_OVERRIDDEN, FLAG_SOLVED, PoseMessage, encode_pose
 from samba_common.skeleton import N_JOINTS, N_MARKERS
 from samba_common.wire import PacketError, decode_packet
 
 from .record import Recorder
-from .relabel import GuidedLabeller, RelabelConfig
-from .swap import SwapConfig, repair_one_swap
+from .labelling import LabelConfig, Labeller, LabelQuality
 from .sync import FrameSync, SyncConfig, SyncPacket
 from .triangulate import TriangulateConfig, Triangulator
 
@@ -56,7 +55,7 @@ class ServerStats:
     queue_overflow: int = 0
     frames: int = 0
     solved: int = 0
-    swaps_repaired: int = 0
+    labels_overridden: int = 0
     solve_skipped: int = 0
     mote_packets: dict[str, int] = field(default_factory=dict)
     latency_ms: list[float] = field(default_factory=list)
@@ -71,16 +70,15 @@ class Server:
 
     def __init__(self, rig: CameraRig, calibration_toml: bytes | None = None, reconstructor=None,
                  config: ServerConfig | None = None, sync_config: SyncConfig | None = None,
-                 tri_config: TriangulateConfig | None = None, swap_config: SwapConfig | None = None,
-                 recorder: Recorder | None = None, relabel_config: RelabelConfig | None = None, publish: PublishFn | None = None,
+                 tri_config: TriangulateConfig | None = None, label_config: LabelConfig | None = None,
+                 recorder: Recorder | None = None, publish: PublishFn | None = None,
                  clock: Callable[[], int] = time.time_ns):
         self.rig = rig
         self.calibration_toml = calibration_toml if calibration_toml is not None else rig.dumps().encode()
         self.config = config or ServerConfig()
         self.sync = FrameSync(sync_config)
         self.triangulator = Triangulator(rig, tri_config)
-        self.swap_config = swap_config or SwapConfig()
-        self.labeller = GuidedLabeller(rig, relabel_config)
+        self.labeller = Labeller(rig, self.triangulator, label_config)
         self.reconstructor = reconstructor
         self.recorder = recorder
         self.publish = publish
@@ -204,40 +202,25 @@ class Server:
         frames = self.sync.push(SyncPacket(pkt.mote_id, pkt.seq, pkt.t_ns, t, pkt))
         return [self._frame(f) for f in frames]
 
-    def markers_for(self, frame, t: float) -> tuple[np.ndarray, int, bool]:
-        """Triangulated markers of a frame at t seconds: ((8, 3) world m NaN = missing, marker mask,
-        swap repaired). Blobs the motes left unlabelled get labels from the predicted pose."""
-        C = len(self.rig.names)
-        uv = np.full((C, N_MARKERS, 2), np.nan)
-        packets = [None] * C
+    def markers_for(self, frame, t: float) -> tuple[np.ndarray, int, LabelQuality]:
+        """The named markers of a frame at t seconds: ((8, 3) world m, NaN = not named, marker
+        mask, label quality). Every mote's blobs, labelled or not, become 3D points that the
+        labelling stage names against the predicted body (:mod:`samba_server.labelling`)."""
+        packets = [None] * len(self.rig.names)
         for mote_id, sp in frame.packets.items():
-            c = self._cam_index[mote_id]
-            uv[c] = sp.payload.labelled_uv(N_MARKERS, True, self.config.drop_merged)
-            packets[c] = sp.payload
-        uv = self.labeller.fill(uv, packets, t)
-        repaired = False
-        res = self.triangulator.triangulate(uv)
-        if self.swap_config.enabled:
-            seen = np.isfinite(uv).all(axis=2)
-            suspicious = np.nanmax(res.error, initial=0.0) > self.swap_config.gate_px or \
-                bool((seen & ~res.used).any())
-            if suspicious:
-                fixed, view = repair_one_swap(self.rig, uv, lambda u: self.triangulator.triangulate(u).points,
-                                              self.swap_config)
-                if view is not None:
-                    repaired = True
-                    self.stats.swaps_repaired += 1
-                    res = self.triangulator.triangulate(fixed)
-        pts = res.points
+            packets[self._cam_index[mote_id]] = sp.payload
+        if self.reconstructor is not None:
+            self.labeller.set_lengths(getattr(self.reconstructor, "lengths", None))
+        pts, quality = self.labeller.label(packets, t)
         mask = int(sum(1 << i for i in range(N_MARKERS) if np.isfinite(pts[i]).all()))
-        return pts, mask, repaired
+        return pts, mask, quality
 
     def _frame(self, frame) -> PoseMessage:
         self.stats.frames += 1
         if self._t0_ns is None:
             self._t0_ns = frame.t_ns
         t = (frame.t_ns - self._t0_ns) / 1e9
-        markers, mask, repaired = self.markers_for(frame, t)
+        markers, mask, quality = self.markers_for(frame, t)
         joints = np.full((N_JOINTS, 3), np.nan)
         residual, flags = float("nan"), 0
         lag_ms = (self.clock() - frame.t_ns) / 1e6
@@ -257,11 +240,13 @@ class Server:
                 self.labeller.observe(t, joints)
         if not frame.complete:
             flags |= FLAG_INCOMPLETE
-        if repaired:
-            flags |= FLAG_SWAP_REPAIRED
+        if quality.overridden:
+            flags |= FLAG_LABEL_OVERRIDDEN
+            self.stats.labels_overridden += quality.overridden
         msg = PoseMessage(seq=self._seq, t_ns=frame.t_ns, joints=joints, residual_m=residual,
                           n_markers=bin(mask).count("1"), n_views=len(frame.packets), flags=flags,
-                          markers=markers, marker_mask=mask)
+                          markers=markers, marker_mask=mask, label_margin_m=quality.margin_m,
+                          label_mode=quality.mode)
         self._seq += 1
         msg.latency_ms = (self.clock() - frame.t_ns) / 1e6
         self.stats.latency_ms.append(msg.latency_ms)

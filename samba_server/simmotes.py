@@ -5,6 +5,11 @@ lens distortion, image bounds, body occlusion), adds centroid noise, and publish
 ``MarkerPacket`` s on its own Zenoh session with a liveliness token, like a real mote whose
 tracker labels correctly. Network effects are simulated: packet loss, delivery jitter,
 a per-mote clock offset and phase, and killing/restarting a mote mid-take.
+
+The demo and the latency benchmark publish :func:`load_demo_take`: the shipped
+``samba_common/data/demo_take.npz``, 8 s of joints derived from the CMU Graphics Lab Motion
+Capture Database (subject 2, trial 5). "The data used in this project was obtained from
+mocap.cs.cmu.edu. The database was created with funding from NSF EIA-0196217."
 """
 
 from __future__ import annotations
@@ -14,6 +19,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass, field
+from importlib.resources import files
 
 import numpy as np
 
@@ -37,6 +43,16 @@ class SimNetwork:
     noise_px: float = 0.05
     kill: dict[int, tuple[float, float]] = field(default_factory=dict)
     seed: int = 0
+
+
+def load_demo_take() -> tuple[np.ndarray, np.ndarray]:
+    """The shipped clip with the standard pose in front: ((F, 13, 3) m, (F,) s) at 60 fps."""
+    from samba_mote.sim.tpose import prepend_tpose
+
+    with files("samba_common").joinpath("data", "demo_take.npz").open("rb") as fh, np.load(fh) as z:
+        joints, t = z["joints"].astype(float), z["t"].astype(float)
+    j, t, _ = prepend_tpose(joints, t, 60.0)
+    return j, t
 
 
 def project_take(rig: CameraRig, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -214,8 +230,6 @@ def _main(argv: list[str] | None = None) -> int:
     import argparse
 
     from samba_common.calib import default_rig
-
-    from .demo import load_demo_take
 
     ap = argparse.ArgumentParser(prog="python -m samba_server.simmotes")
     ap.add_argument("--connect", required=True)

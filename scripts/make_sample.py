@@ -17,7 +17,7 @@ import numpy as np
 from samba_common.body import prepend_standard_pose
 from samba_common.bvh import load_bvh, put_on_floor, resample
 from samba_common.formats import save_joints, save_markers
-from samba_server.evaluate import observe, vary_body
+from samba_server.recon.evaluate import observe, vary_body
 
 DATA = Path(__file__).resolve().parents[1] / "samba_common" / "data"
 

@@ -31,8 +31,17 @@ class SimConfig:
     limb_radius: float = 0.055  #: m, capsule radius of arms and legs
     torso_radius: float = 0.13  #: m, capsule radius of the torso
     tpose_hold: float = 1.0  #: s of T-pose prepended to each take
-    tpose_transition: float = 0.6  #: s of blend from the T-pose into the take
-    tpose_stance: float = 0.12  #: m each ankle stands outside its hip in the T-pose (0 = legs straight down)
+    tpose_transition: float = 0.6  #: s of blend from the T-pose into the take (at least; longer to walk there)
+    #: m each ankle stands outside its hip in the T-pose, or "hip" (0.0: legs straight down,
+    #: ankles at hip width), "apart" (0.12), "together" (feet touching; negative)
+    tpose_stance: float | str = 0.0
+    #: (x, y) m where the T-pose stands (the volume centre); the lead-in then walks (1 m/s) to
+    #: where the take starts. None: stand where the take starts
+    pose_at: tuple[float, float] | None = (0.0, 0.0)
+    #: (start, seconds) windows of take time (from the first frame of the output, lead-in
+    #: included) in which no marker is visible in any camera; noise and distractors still render
+    blackout: tuple[tuple[float, float], ...] = ()
+    codec: str = "ffv1"  #: video codec of make_take's files: ffv1 (lossless) | mjpg | h264
 
 
 @dataclass
@@ -173,11 +182,24 @@ class RenderedCamera:
     visible: np.ndarray
 
 
-def render_camera(camera: Camera, joints: np.ndarray, cfg: SimConfig, seed: int = 0) -> RenderedCamera:
-    """Render every frame of (F, 13, 3) joints for one camera."""
+def blackout_frames(t: np.ndarray, cfg: SimConfig) -> np.ndarray:
+    """(F,) bool: frames at times t (s) inside one of ``cfg.blackout``'s (start, seconds) windows."""
+    t = np.asarray(t, float)
+    out = np.zeros(len(t), bool)
+    for start, seconds in cfg.blackout:
+        out |= (t >= start - 1e-9) & (t < start + seconds - 1e-9)
+    return out
+
+
+def render_camera(camera: Camera, joints: np.ndarray, cfg: SimConfig, seed: int = 0,
+                  t: np.ndarray | None = None) -> RenderedCamera:
+    """Render every frame of (F, 13, 3) joints for one camera. With the frame times ``t`` (F,) s,
+    no marker is visible in ``cfg.blackout``."""
     rng = np.random.default_rng(seed)
     distractors = make_distractors(camera.size, cfg, rng)
     uv, radius, vis = project_markers(camera, joints, cfg)
+    if t is not None and cfg.blackout:
+        vis[blackout_frames(t, cfg)] = False
     w, h = camera.size
     frames = np.empty((len(joints), h, w), np.uint8)
     for f in range(len(joints)):
@@ -189,9 +211,10 @@ def render_take(joints: np.ndarray, t: np.ndarray, rig: CameraRig, config: SimCo
                 seed: int = 0) -> list[RenderedCamera]:
     """Frames per camera of a take. joints: (F, 13, 3) world m at times t (F,) s.
 
-    Frames are rendered exactly at the given times (resample beforehand for another rate).
+    Frames are rendered exactly at the given times (resample beforehand for another rate);
+    ``cfg.blackout`` windows are in these times.
     """
     cfg = config or SimConfig()
     if joints.ndim != 3 or joints.shape[1:] != (13, 3) or len(t) != len(joints):
         raise ValueError(f"expected joints (F, 13, 3) and t (F,), got {joints.shape} and {np.shape(t)}")
-    return [render_camera(cam, joints, cfg, seed=seed * 1000 + i) for i, cam in enumerate(rig.cameras)]
+    return [render_camera(cam, joints, cfg, seed=seed * 1000 + i, t=t) for i, cam in enumerate(rig.cameras)]

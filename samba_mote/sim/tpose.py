@@ -14,18 +14,50 @@ from samba_common.skeleton import BONE_TYPES, J, N_JOINTS
 
 _L = {name: i for i, name in enumerate(BONE_TYPES)}
 
+#: named stances of the standard pose: how far (m) each ankle stands outside its hip.
+#: "together" depends on the hip width (the ankles ~6 cm either side of the midline).
+STANCES = ("hip", "apart", "together")
+_FEET_TOGETHER_HALF = 0.06  #: m, ankle to midline with the feet touching
+_STANCE_APART = 0.12
+
+
+def stance_offset(stance: float | str, hip_width: float) -> float:
+    """The ankle-outside-hip offset (m) of ``stance``: a number (m, negative = legs converging)
+    or one of :data:`STANCES` -- ``hip`` 0.0 (ankles straight below the hips), ``apart`` 0.12,
+    ``together`` -(hip_width / 2 - 0.06) (feet touching, ankles ~6 cm from the midline)."""
+    if isinstance(stance, str):
+        key = stance.strip().lower()
+        if key == "hip":
+            return 0.0
+        if key == "apart":
+            return _STANCE_APART
+        if key == "together":
+            return -(hip_width / 2 - _FEET_TOGETHER_HALF)
+        try:
+            return float(key)
+        except ValueError:
+            raise ValueError(f"stance must be {'|'.join(STANCES)} or metres, not {stance!r}") from None
+    return float(stance)
+
 
 def tpose(lengths: np.ndarray, hip_xy: np.ndarray = (0.0, 0.0), ankle_z: float = 0.08,
-          stance: float = 0.12) -> np.ndarray:
+          stance: float | str = 0.12) -> np.ndarray:
     """T-pose joints (13, 3): lengths (8,) in BONE_TYPES order (metres), hip midpoint at
     ``hip_xy`` (2,), ankles at height ``ankle_z``; facing +Y, right hand toward +X.
 
-    The straight legs spread so that each ankle is ``stance`` m further out than its hip
-    (feet about shoulder-width apart, so knee and ankle markers stay apart in the images)."""
+    The straight legs lean so that each ankle is ``stance`` m further out than its hip
+    (:func:`stance_offset`: a number or hip / apart / together). 0 = legs straight down,
+    ankles at hip width; negative = legs converging (down to the feet touching at the
+    midline, ``-hip_width / 2``; closer would cross the legs: ValueError)."""
     ln = {k: float(lengths[i]) for k, i in _L.items()}
+    stance = stance_offset(stance, ln["hip_width"])
     x0, y0 = float(hip_xy[0]), float(hip_xy[1])
     leg = ln["shin"] + ln["thigh"]
-    drop = float(np.sqrt(max(leg ** 2 - stance ** 2, 1e-6)))
+    if stance < -ln["hip_width"] / 2 - 1e-9:
+        raise ValueError(f"stance {stance:+.3f} m crosses the legs (hip width {ln['hip_width']:.3f} m)")
+    if abs(stance) >= 0.9 * leg:
+        raise ValueError(f"stance {stance:+.3f} m is too wide for legs of {leg:.2f} m")
+    drop = float(np.sqrt(leg ** 2 - stance ** 2))
     hip_z = ankle_z + drop
     sh_z = hip_z + ln["torso"]
     out = np.zeros((N_JOINTS, 3))
@@ -57,33 +89,52 @@ def _rot_z(a: float) -> np.ndarray:
 
 
 def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1.0,
-                  transition: float = 0.6, stance: float = 0.12) -> tuple[np.ndarray, np.ndarray, int]:
-    """Prepend ``hold`` s of T-pose and a ``transition`` s blend into the take.
+                  transition: float = 0.6, stance: float | str = 0.12, *,
+                  pose_at: tuple[float, float] | np.ndarray | None = None, walk_speed: float = 1.0,
+                  max_speed: float = 2.5) -> tuple[np.ndarray, np.ndarray, int]:
+    """Prepend ``hold`` s of T-pose and a blend into the take.
 
     joints: (F, 13, 3) metres at times t (F,) (uniform at ``fps``). The T-pose uses the
-    first frame's bone lengths, hip position and ankle height. The blend turns the body
-    about the vertical axis (shortest way) while moving the joints from the T-pose to the
-    first frame, so no marker jumps. Returns (joints (P+F, 13, 3), t (P+F,) from 0, P).
+    first frame's bone lengths and ankle height, and ``stance`` (:func:`stance_offset`). It
+    stands at ``pose_at`` (x, y) m, or where the take starts if None.
+
+    The blend moves the hips along the straight line from the pose to the first frame's
+    position, turns the body about the vertical axis (shortest way) and moves the joints
+    from the T-pose to the first frame, all with one smoothstep weight, so nothing jumps.
+    It lasts max(``transition``, distance / ``walk_speed``, long enough that no joint moves
+    faster than ``max_speed`` m/s). Returns (joints (P+F, 13, 3), t (P+F,) from 0, P).
     """
     first = joints[0]
     lengths = bone_lengths(first[None])[0]
     hip = 0.5 * (first[J["left_hip"]] + first[J["right_hip"]])
     ankle_z = float(min(first[J["left_ankle"], 2], first[J["right_ankle"], 2]))
-    tp = tpose(lengths, hip[:2], ankle_z, stance)
+    place = hip[:2] if pose_at is None else np.asarray(pose_at, float).reshape(2)
+    tp = tpose(lengths, place, ankle_z, stance)
     n_hold = int(round(hold * fps))
-    n_tr = int(round(transition * fps))
     yaw = heading(first)
     yaw = (yaw + np.pi) % (2 * np.pi) - np.pi
     tp_hip = 0.5 * (tp[J["left_hip"]] + tp[J["right_hip"]])
     local_tp = tp - tp_hip
     local_first = (first - hip) @ _rot_z(-yaw).T  # first frame turned to face +Y
+
+    def at(w: float) -> np.ndarray:
+        local = (1 - w) * local_tp + w * local_first
+        centre = (1 - w) * tp_hip + w * hip
+        return local @ _rot_z(w * yaw).T + centre
+
+    # duration: walking pace along the path, and no joint faster than max_speed (the
+    # smoothstep's peak rate is 1.5 / duration)
+    ws = np.linspace(0.0, 1.0, 201)
+    path = np.stack([at(w) for w in ws])
+    dp_dw = float(np.linalg.norm(np.diff(path, axis=0), axis=2).max()) * (len(ws) - 1)
+    dist = float(np.linalg.norm(hip[:2] - tp_hip[:2]))
+    duration = max(transition, dist / walk_speed if walk_speed > 0 else 0.0,
+                   1.5 * dp_dw / max_speed if max_speed > 0 else 0.0)
+    n_tr = int(round(duration * fps))
     blend = []
     for k in range(1, n_tr + 1):
         w = k / (n_tr + 1)
-        w = w * w * (3 - 2 * w)  # smoothstep
-        local = (1 - w) * local_tp + w * local_first
-        centre = (1 - w) * tp_hip + w * hip
-        blend.append(local @ _rot_z(w * yaw).T + centre)
+        blend.append(at(w * w * (3 - 2 * w)))  # smoothstep
     pre = [np.repeat(tp[None], n_hold, axis=0)]
     if blend:
         pre.append(np.asarray(blend))

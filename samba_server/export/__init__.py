@@ -1,7 +1,7 @@
 """Exports of a Samba take to the formats other tools read: BVH, C3D, TRC (OpenSim), CSV.
 
 ``export_take(take, fmt, out)`` picks the writer from :data:`WRITERS`; ``samba-export`` is the
-command line (:mod:`samba_server.export.cli`). Axis and unit conventions are in each module
+command line (:mod:`samba_server.cli.export`). Axis and unit conventions are in each module
 and in docs/exports.md.
 """
 

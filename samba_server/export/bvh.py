@@ -24,18 +24,24 @@ Each segment's global rotation maps its rest bone direction exactly onto the obs
 twist about the bone comes from a neighbour: the hip axis and torso for the pelvis/chest, the
 knee/elbow hinge (blended with the parent's axis when the limb is straight) for the limbs.
 Frames with a missing joint hold the last complete pose (logged and counted).
+
+Reading back: :func:`fk_positions` maps a Samba-exported BVH (parsed with
+:func:`samba_common.bvh.read_bvh`) back to the 13 Samba joints in the Samba world frame; the
+writer uses it to check that the file means what it says.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import sys
 import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from samba_common.bvh import BvhDocument, BvhError, forward_kinematics, read_bvh
 from samba_common.skeleton import J, JOINT_NAMES
 
 from .take import ExportTake, fill_invalid
@@ -220,11 +226,20 @@ def _hierarchy_text(off: dict[str, np.ndarray]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def fk_positions(bvh: BvhDocument) -> np.ndarray:
+    """The 13 Samba joints (F, 13, 3) in world metres (Z up) from a Samba-exported BVH."""
+    samba_to_bvh = {v: k for k, v in BVH_TO_SAMBA.items()}
+    g = forward_kinematics(bvh)
+    try:
+        cols = [bvh.index(samba_to_bvh[n]) for n in JOINT_NAMES]
+    except KeyError as exc:
+        raise BvhError(f"not a Samba BVH: no joint {exc}") from None
+    return g[:, cols] @ np.linalg.inv(TO_BVH).T
+
+
 def write_bvh(path: str | os.PathLike, take: ExportTake) -> BvhExportReport:
     """Write ``take`` as BVH (Y up, cm, see module doc). One BVH frame per take frame; Frame
     Time = median time step. Frames with NaN joints hold the last complete pose."""
-    from .bvh_fk import fk_positions, parse_bvh  # local: only needed for the self-check
-
     filled, held = fill_invalid(take.joints)
     fps = take.rate()
     if take.n_frames > 2:
@@ -250,7 +265,7 @@ def write_bvh(path: str | os.PathLike, take: ExportTake) -> BvhExportReport:
         fh.write(body + "\n")
     os.replace(tmp, path)
     report = BvhExportReport(take.n_frames, int(held.sum()), fps, lengths)
-    back = fk_positions(parse_bvh(path))  # (F, 13, 3) metres Samba world
+    back = fk_positions(read_bvh(path))  # (F, 13, 3) metres Samba world
     valid = ~held
     if valid.any():
         err = np.linalg.norm(back[valid] - take.joints[valid], axis=-1)
@@ -261,4 +276,5 @@ def write_bvh(path: str | os.PathLike, take: ExportTake) -> BvhExportReport:
     if report.max_error_m > 0.01:
         log.warning("%s: bone lengths vary in this take; the fixed-length skeleton is off by up to "
                     "%.1f mm", path, 1e3 * report.max_error_m)
+    print(f"wrote {os.fspath(path)}: {report.n_frames} frames at {fps:g} fps", file=sys.stderr)
     return report

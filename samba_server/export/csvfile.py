@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import logging
 import os
+import sys
 
 import numpy as np
 
@@ -38,4 +39,6 @@ def write_joints_csv(path: str | os.PathLike, joints: np.ndarray, t: np.ndarray)
 
 def write_csv(path: str | os.PathLike, take: ExportTake) -> int:
     """Write a take's joints as CSV; returns the number of rows written (frames)."""
-    return write_joints_csv(path, take.joints, take.t)
+    n = write_joints_csv(path, take.joints, take.t)
+    print(f"wrote {os.fspath(path)}: {n} frames", file=sys.stderr)
+    return n

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
 
 import numpy as np
 
@@ -54,4 +55,5 @@ def write_trc(path: str | os.PathLike, take: ExportTake) -> int:
         fh.write("\n".join(lines) + "\n")
     os.replace(tmp, path)
     log.info("%s: %d frames, %d points", path, F, P)
+    print(f"wrote {os.fspath(path)}: {F} frames x {P} points", file=sys.stderr)
     return P

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import sys
 
 import cv2
 import numpy as np
@@ -16,6 +17,11 @@ from samba_common.calib import (
     rodrigues,
     rotation_to_rvec,
 )
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
 
 
 def _body_points() -> np.ndarray:
@@ -192,3 +198,68 @@ def test_replace_camera() -> None:
     new = rig.replace(cam)
     assert new.camera("cam1").matrix[0, 0] == 150.0 and rig.camera("cam1").matrix[0, 0] == 140.0
     assert new.replace(Camera("cam9", (160, 120), np.eye(3))).names == ["cam0", "cam1", "cam9"]
+
+
+def _aniposelib_text(rig: CameraRig, units: str | None, scale: float) -> str:
+    """calibration.toml the way aniposelib's ``CameraGroup.dump`` (the ``toml`` package) writes
+    it, translations multiplied by ``scale``; ``units`` in [metadata] when given."""
+
+    def arr(v) -> str:
+        v = np.asarray(v, dtype=float)
+        if v.ndim == 2:
+            return "[ " + " ".join(arr(r) + "," for r in v) + "]"
+        return "[ " + " ".join(f"{x!r}," for x in v.tolist()) + "]"
+
+    parts = []
+    for i, c in enumerate(rig.cameras):
+        parts.append(f'[cam_{i}]\nname = "{c.name}"\nsize = [ {c.size[0]}, {c.size[1]},]\nmatrix = {arr(c.matrix)}\n'
+                     f"distortions = {arr(c.dist)}\nrotation = {arr(c.rvec)}\ntranslation = {arr(c.tvec * scale)}\n")
+    meta = "[metadata]\nadjusted = true\nerror = 0.41\n" + (f'units = "{units}"\n' if units else "")
+    return "\n".join(parts) + "\n" + meta
+
+
+@pytest.mark.parametrize("units, scale", [("mm", 1000.0), ("cm", 100.0), ("m", 1.0), (None, 1.0)])
+def test_units_in_metadata_scale_translations_to_metres(tmp_path, units, scale) -> None:
+    rig = default_rig(4)
+    path = tmp_path / "calibration.toml"
+    path.write_text(_aniposelib_text(rig, units, scale))
+    back = CameraRig.load(path)
+    assert back.metadata["units"] == "m" and back.metadata["error"] == 0.41
+    for a, b in zip(rig, back):
+        np.testing.assert_allclose(b.tvec, a.tvec, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(b.center, a.center, atol=1e-9)  # metres: ~5 m, not 5 km
+        assert np.array_equal(a.matrix, b.matrix) and np.array_equal(a.rvec, b.rvec)
+    X = np.array([[0.3, -0.2, 1.1], [0.0, 0.5, 0.2]])
+    np.testing.assert_allclose(back.project(X), rig.project(X), atol=1e-9)  # same pixels
+    # saving writes metres (and says so); reloading gives the same rig
+    out = tmp_path / "saved.toml"
+    back.save(out)
+    assert tomllib.loads(out.read_text())["metadata"]["units"] == "m"
+    again = CameraRig.load(out)
+    for a, b in zip(back, again):
+        assert np.array_equal(a.tvec, b.tvec)
+
+
+def test_unknown_units_name_file_and_key(tmp_path) -> None:
+    for bad in ('"inch"', '"MM"', "1000"):
+        path = tmp_path / "calibration.toml"
+        path.write_text(GOOD + f"\n[metadata]\nunits = {bad}\n")
+        with pytest.raises(CalibrationError) as ei:
+            CameraRig.load(path)
+        assert ei.value.key == "metadata.units"
+        assert str(path) in str(ei.value) and "[metadata.units]" in str(ei.value) and "'mm'" in str(ei.value)
+
+
+def test_millimetres_without_units_are_flagged(tmp_path, caplog) -> None:
+    path = tmp_path / "calibration.toml"
+    path.write_text(_aniposelib_text(default_rig(2), None, 1000.0))
+    CameraRig.load(path)  # cannot know: loads as metres, but says what to do
+    assert 'units = "mm"' in caplog.text and str(path) in caplog.text
+
+
+def test_rig_metadata_units_never_mislabel_a_saved_file(tmp_path) -> None:
+    rig = default_rig(2)
+    rig.metadata["units"] = "mm"  # tvec is metres in memory whatever this says
+    rig.save(tmp_path / "c.toml")
+    back = CameraRig.load(tmp_path / "c.toml")
+    np.testing.assert_allclose(back.cameras[0].tvec, rig.cameras[0].tvec)

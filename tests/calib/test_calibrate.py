@@ -183,7 +183,7 @@ def test_reconstruction_with_recovered_calibration_matches_true_calibration() ->
     """The issue's end-to-end target: a take reconstructed from markers triangulated with the
     recovered calibration is within 0.3 cm of the one from the true calibration (world frame
     aligned; the floor step is measured separately)."""
-    from samba_server.reconstruct import reconstruct_take
+    from samba_server.recon import reconstruct_take
 
     rig = default_rig(4)
     obs = simulate_wand(rig, 600, 0.5, noise_px=0.2, seed=10, fps=10.0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from samba_common.calib import Camera, CameraRig, default_rig
-from samba_server.calibrate.cli import main
+from samba_server.cli.calibrate import main
 from samba_server.calibrate.intrinsics import Board, BoardError, calibrate_intrinsics, render_board_views
 from samba_server.calibrate.simwand import pose_errors, simulate_wand
 from samba_server.calibrate.takeio import TakeError, read_take

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from samba_common.bvh import BvhError, read_bvh
 from samba_common.skeleton import J
-from samba_server.export.bvh import write_bvh
-from samba_server.export.bvh_fk import BvhParseError, fk_positions, parse_bvh
+from samba_server.export.bvh import fk_positions, write_bvh
 from samba_server.export.take import ExportTake, TakeError
 
 CMU = Path("/work/shared/data/cmu-bvh/002_01.bvh")
@@ -25,7 +25,7 @@ def test_fk_of_written_file_reproduces_positions_within_1mm(tmp_path, walk):
     joints, t = walk
     out = tmp_path / "walk.bvh"
     report = write_bvh(out, _take(joints, t))
-    back = fk_positions(parse_bvh(out))
+    back = fk_positions(read_bvh(out))
     assert back.shape == joints.shape
     err = np.linalg.norm(back - joints, axis=-1)
     assert err.max() < 1e-3, f"max FK error {err.max() * 1e3:.3f} mm"
@@ -50,7 +50,7 @@ def test_axes_units_y_up_centimetres_facing_minus_z(tmp_path, walk):
     joints, t = walk
     out = tmp_path / "walk.bvh"
     write_bvh(out, _take(joints, t))
-    f = parse_bvh(out)
+    f = read_bvh(out)
     assert f.frame_time == pytest.approx(1 / 60, rel=1e-6)
     off = {j.name: j.offset for j in f.joints}
     assert off["LeftUpLeg"][0] < 0 < off["RightUpLeg"][0]  # left is -X
@@ -69,7 +69,7 @@ def test_twist_is_continuous(tmp_path, walk):
     joints, t = walk
     out = tmp_path / "walk.bvh"
     write_bvh(out, _take(joints, t))
-    f = parse_bvh(out)
+    f = read_bvh(out)
     for j in f.joints:
         start = j.first + (3 if j.parent < 0 else 0)
         R = Rotation.from_euler("ZXY", f.motion[:, start:start + 3], degrees=True)
@@ -87,7 +87,7 @@ def test_nan_frames_hold_last_pose(tmp_path, walk, caplog):
     with caplog.at_level("WARNING"):
         report = write_bvh(out, _take(j, t))
     assert report.n_held == 14 and "holding the last complete pose" in caplog.text
-    back = fk_positions(parse_bvh(out))
+    back = fk_positions(read_bvh(out))
     assert back.shape[0] == 120  # never drop frames
     np.testing.assert_allclose(back[0], joints[3], atol=1e-3)
     np.testing.assert_allclose(back[45], joints[39], atol=1e-3)
@@ -111,7 +111,7 @@ def test_real_clip_legs_exact_and_error_reported(tmp_path):
     src = load_bvh(CMU)
     out = tmp_path / "cmu.bvh"
     report = write_bvh(out, _take(src.joints, src.t, str(CMU)))
-    back = fk_positions(parse_bvh(out))
+    back = fk_positions(read_bvh(out))
     legs = [J[n] for n in ("left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle")]
     assert np.abs(back[:, legs] - src.joints[:, legs]).max() < 1e-3
     err = np.linalg.norm(back - src.joints, axis=-1).max()
@@ -122,8 +122,8 @@ def test_real_clip_legs_exact_and_error_reported(tmp_path):
 def test_parse_rejects_garbage(tmp_path):
     bad = tmp_path / "bad.bvh"
     bad.write_text("HIERARCHY\nROOT Hips\n{\n OFFSET 0 0\n")
-    with pytest.raises(BvhParseError, match="bad.bvh"):
-        parse_bvh(bad)
+    with pytest.raises(BvhError, match="bad.bvh"):
+        read_bvh(bad)
     bad.write_text("not a bvh")
-    with pytest.raises(BvhParseError, match="HIERARCHY"):
-        parse_bvh(bad)
+    with pytest.raises(BvhError, match="HIERARCHY"):
+        read_bvh(bad)

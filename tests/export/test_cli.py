@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from samba_common.formats import save_joints, save_markers
+from samba_common.bvh import read_bvh
 from samba_common.skeleton import MARKER_JOINT
-from samba_server.export.bvh_fk import fk_positions, parse_bvh
-from samba_server.export.cli import main
+from samba_server.cli.export import main
+from samba_server.export.bvh import fk_positions
 
 
 @pytest.fixture
@@ -33,7 +34,7 @@ def test_each_format_writes_a_file(tmp_path, joints_npz, fmt):
 def test_bvh_from_npz_reproduces_joints(tmp_path, joints_npz, walk):
     out = tmp_path / "take.bvh"
     assert main([str(joints_npz), "--out", str(out)]) == 0  # format from the suffix
-    assert np.abs(fk_positions(parse_bvh(out)) - walk[0]).max() < 1e-3
+    assert np.abs(fk_positions(read_bvh(out)) - walk[0]).max() < 1e-3
 
 
 def test_markers_option_adds_markers(tmp_path, joints_npz, walk):
@@ -60,7 +61,7 @@ def test_errors_and_exit_codes(tmp_path, joints_npz, capsys):
 
 def test_console_script_runs(tmp_path, joints_npz):
     out = tmp_path / "take.csv"
-    proc = subprocess.run([sys.executable, "-m", "samba_server.export.cli", str(joints_npz), "-o", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "samba_server.cli.export", str(joints_npz), "-o", str(out)],
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout == "" and out.read_text().startswith("t,head_x")

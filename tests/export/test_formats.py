@@ -42,8 +42,9 @@ def test_c3d_round_trip(tmp_path, take):
     res = c["data"]["meta_points"]["residuals"][0]
     assert np.all(res[:13, 10] == -1) and np.all(res[15, 20:25] == -1)
     assert np.sum(res == -1) == 13 + 8 + 5  # frame 10 (13 joints + 8 markers) + wrist gap
-    t = np.asarray(c["parameters"]["SAMBA"]["TIME"]["value"])
-    np.testing.assert_allclose(t, take.t, atol=1e-6)
+    t0 = c["parameters"]["SAMBA"]["T0"]["value"][0]
+    rate = c["parameters"]["POINT"]["RATE"]["value"][0]
+    np.testing.assert_allclose(t0 + np.arange(120) / rate, take.t, atol=1e-6)
 
 
 def test_trc_layout_and_values(tmp_path, take):

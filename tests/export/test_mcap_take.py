@@ -5,9 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from samba_common.bvh import read_bvh
 from samba_common.skeleton import MARKER_JOINT
-from samba_server.export.bvh_fk import fk_positions, parse_bvh
-from samba_server.export.cli import main
+from samba_server.cli.export import main
+from samba_server.export.bvh import fk_positions
 from samba_server.export.take import TakeError, load_take
 
 record = pytest.importorskip("samba_server.record")
@@ -48,7 +49,7 @@ def test_export_bvh_from_mcap(tmp_path, walk):
     _record(path, joints, t)
     out = tmp_path / "take.bvh"
     assert main([str(path), "--format", "bvh", "--out", str(out)]) == 0
-    assert np.abs(fk_positions(parse_bvh(out)) - joints).max() < 1e-3
+    assert np.abs(fk_positions(read_bvh(out)) - joints).max() < 1e-3
 
 
 def test_mcap_without_poses_is_a_clear_error(tmp_path):

@@ -17,6 +17,7 @@ def free_port() -> int:
 @pytest.fixture(scope="session")
 def small_take(tmp_path_factory):
     """A 2-camera, 2-second synthetic take on disk (plus the 1.6 s T-pose lead-in)."""
-    from samba_mote.sim import make_take
+    from samba_mote.sim import SimConfig, make_take
 
-    return make_take(tmp_path_factory.mktemp("take"), None, rig=2, seconds=2.0, seed=3)
+    return make_take(tmp_path_factory.mktemp("take"), None, rig=2, seconds=2.0, seed=3,
+                     config=SimConfig(tpose_stance="apart", pose_at=None))

@@ -11,7 +11,7 @@ from samba_common.calib import CameraRig
 from samba_common.formats import load_joints, load_markers
 from samba_common.skeleton import J, MARKER_JOINT
 from samba_mote.sim import SimConfig, make_take
-from samba_mote.sim.cli import main as sim_main
+from samba_mote.cli.sim import main as sim_main
 from samba_mote.sources import open_source
 
 BVH = Path("/work/shared/data/cmu-bvh/005_03.bvh")
@@ -88,7 +88,7 @@ def test_cli_writes_take_and_rig(tmp_path) -> None:
     out = tmp_path / "take"
     assert sim_main([str(out), "--cameras", "2", "--seconds", "0.5", "--noise", "4"]) == 0
     assert {p.name for p in out.iterdir()} >= {"cam0.avi", "cam1.avi", "joints.npz", "markers.npz", "calibration.toml"}
-    assert sim_main([str(out), "--bvh", str(tmp_path / "missing.bvh")]) == 2
+    assert sim_main([str(out), "--bvh", str(tmp_path / "missing.bvh")]) == 1  # a missing input: runtime error
 
 
 def test_sim_source_streams_the_rendered_frames() -> None:

@@ -205,7 +205,7 @@ def test_runner_reopens_failing_source(small_take) -> None:
 
 
 def test_cli_serial_record_and_exit_codes(tmp_path, small_take) -> None:
-    from samba_mote.cli import main
+    from samba_mote.cli.mote import main
 
     out = tmp_path / "rec.mcap"
     assert main(["--id", "cam1", "--source", f"file:{small_take.video('cam1')}", "--transport", "serial:loop://",
@@ -221,7 +221,7 @@ def test_cli_serial_record_and_exit_codes(tmp_path, small_take) -> None:
 
 def test_cli_sigterm_clean_shutdown(free_port: int) -> None:
     env = dict(os.environ, OPENCV_LOG_LEVEL="ERROR")
-    proc = subprocess.Popen([sys.executable, "-m", "samba_mote.cli", "--id", "cam0", "--source",
+    proc = subprocess.Popen([sys.executable, "-m", "samba_mote.cli.mote", "--id", "cam0", "--source",
                              "sim:?seconds=3&loop=1", "--listen", f"tcp/127.0.0.1:{free_port}",
                              "--calibration-timeout", "0.2"], stderr=subprocess.PIPE, text=True, env=env)
     try:
@@ -238,6 +238,7 @@ def test_cli_sigterm_clean_shutdown(free_port: int) -> None:
 
 def test_mote_package_imports_without_scipy() -> None:
     """Motes are small boards: the mote code must not pull in scipy."""
-    code = ("import sys; import samba_mote.cli, samba_mote.gateway, samba_mote.pipeline, samba_mote.sources, "
-            "samba_mote.transports, samba_mote.runner; assert 'scipy' not in sys.modules, 'scipy imported'")
+    code = ("import sys; import samba_mote.cli.mote, samba_mote.cli.gateway, samba_mote.gateway, samba_mote.pipeline, "
+            "samba_mote.sources, samba_mote.transports, samba_mote.runner; "
+            "assert 'scipy' not in sys.modules, 'scipy imported'")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)

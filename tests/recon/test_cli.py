@@ -4,8 +4,8 @@ import sys
 import numpy as np
 
 from samba_common.formats import load_joints, save_markers
-from samba_server.db import sample_path
-from samba_server.reconstruct_cli import main
+from samba_server.cli.reconstruct import main
+from samba_server.recon.db import sample_path
 
 
 def test_reconstruct_sample_take_writes_joints_and_csv(tmp_path, capsys):
@@ -36,7 +36,7 @@ def test_bad_inputs_exit_1_with_a_message(tmp_path, capsys):
 
 
 def test_console_script_help():
-    r = subprocess.run([sys.executable, "-m", "samba_server.reconstruct_cli", "--help"], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "samba_server.cli.reconstruct", "--help"], capture_output=True, text=True)
     assert r.returncode == 0 and "--pseudo" in r.stdout
-    r = subprocess.run([sys.executable, "-m", "samba_server.reconstruct_cli"], capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-m", "samba_server.cli.reconstruct"], capture_output=True, text=True)
     assert r.returncode == 2

@@ -2,8 +2,8 @@ import numpy as np
 import pytest
 
 from samba_common.formats import FormatError
-from samba_server.db import MotionDB, build_db, load_default_db
-from samba_server.db_cli import main as db_main
+from samba_server.cli.db import main as db_main
+from samba_server.recon.db import MotionDB, build_db, load_default_db
 
 from ..common.bvh_factory import write_cmu_bvh
 

@@ -6,9 +6,9 @@ import numpy as np
 
 from samba_common.body import D, fk, standard_dirs
 from samba_common.config import load_section
-from samba_server import kernels
-from samba_server.kdtree import KDTree
-from samba_server.reconstruct import ReconstructConfig
+from samba_server.recon import kernels
+from samba_server.recon.kdtree import KDTree
+from samba_server.recon.reconstruct import ReconstructConfig
 
 LENGTHS = np.array([0.37, 0.19, 0.5, 0.14, 0.25, 0.26, 0.47, 0.45])
 

@@ -4,10 +4,10 @@ import pytest
 from samba_common.body import bone_lengths, prepend_standard_pose
 from samba_common.bvh import load_bvh, resample
 from samba_common.skeleton import UNOBSERVED_JOINTS
-from samba_server.db import load_default_db
-from samba_server.evaluate import mpjpe, observe, vary_body
-from samba_server.proportions import ProportionError, estimate_lengths
-from samba_server.reconstruct import Reconstructor, reconstruct_take
+from samba_server.recon.db import load_default_db
+from samba_server.recon.evaluate import mpjpe, observe, vary_body
+from samba_server.recon.proportions import ProportionError, estimate_lengths
+from samba_server.recon.reconstruct import Reconstructor, reconstruct_take
 
 
 @pytest.fixture(scope="module")

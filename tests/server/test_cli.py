@@ -8,8 +8,9 @@ import pytest
 from samba_common.calib import default_rig
 from samba_common.formats import load_joints
 from samba_common.wire import encode_packet
-from samba_server import inspect as inspect_cli
-from samba_server import replay, server_cli
+from samba_server.cli import inspect as inspect_cli
+from samba_server.cli import replay
+from samba_server.cli import server as server_cli
 from samba_server.record import Recorder
 from samba_server.simmotes import make_packet, project_take
 
@@ -77,7 +78,7 @@ def test_viewer_record_buttons_start_and_stop_a_readable_recording(tmp_path):
     from samba_common.calib import default_rig
     from samba_server.record import TakeReader
     from samba_server.server import Server
-    from samba_server.server_cli import record_toggle
+    from samba_server.app import record_toggle
 
     server = Server(default_rig(2))
     toggle = record_toggle(server, tmp_path)

@@ -8,10 +8,9 @@ import sys
 from pathlib import Path
 
 from samba_common.formats import FormatError
-
-from . import WRITERS, export_take
-from .bvh import BvhExportReport
-from .take import TakeError, load_take
+from samba_server.export import WRITERS, export_take
+from samba_server.export.bvh import BvhExportReport
+from samba_server.export.take import TakeError, load_take
 
 log = logging.getLogger("samba_server.export")
 

@@ -15,7 +15,7 @@ proportions as a prior, scaled by what the take shows:
 - neck = database value × the mean scale of the observed bones.
 
 :func:`estimate_lengths` does this on a whole take (or its first second live); the
-reconstructor's whole-take refinement (:func:`samba_server.reconstruct.refine_lengths`) then
+reconstructor's whole-take refinement (:func:`samba_server.recon.reconstruct.refine_lengths`) then
 adjusts the unobserved split with the evidence of every frame.
 """
 

@@ -5,7 +5,7 @@ A :class:`MotionDB` stores, per pose, the 11 bone directions in the torso frame
 the thesis (body frame of :mod:`samba_common.align`, shin = 1) for inspection and for search
 with the database's own proportions. Bone lengths are kept per source clip. Neighbour search
 uses the directions re-posed with the *subject's* bone lengths (see
-:class:`samba_server.reconstruct.Reconstructor`), so the database body never leaks into the
+:class:`samba_server.recon.reconstruct.Reconstructor`), so the database body never leaks into the
 output proportions.
 """
 

@@ -1,5 +1,7 @@
-"""``samba-server``: the live server (Zenoh in, poses out), plus helpers shared by the other
-server CLIs (config loading, logging, building a :class:`Server`, the status line)."""
+"""Running a :class:`~samba_server.server.Server` as an application: configs/server.toml loading,
+logging, building a Server with its reconstructor and recorder, running it live on Zenoh with
+the status line and the browser viewer, exporting its poses. Used by the command lines of
+:mod:`samba_server.cli` (server, process, replay, demo) and by the benchmarks."""
 
 from __future__ import annotations
 
@@ -18,14 +20,14 @@ from typing import Callable
 import numpy as np
 
 from samba_common import zenoh_util as zk
-from samba_common.calib import CalibrationError, CameraRig
-from samba_common.config import ConfigError, from_dict, read_toml
+from samba_common.calib import CameraRig
+from samba_common.config import from_dict, read_toml
 
-from .reconstruct import ReconstructConfig
-from .relabel import RelabelConfig
+from .recon.reconstruct import ReconstructConfig
+from .labelling.labeller import LabelConfig
+from .labelling.points import PointsConfig
 from .record import Recorder, RecorderError
 from .server import Server, ServerConfig
-from .swap import SwapConfig
 from .sync import SyncConfig
 from .triangulate import TriangulateConfig
 
@@ -39,9 +41,8 @@ class ServerConfigs:
     server: ServerConfig
     sync: SyncConfig
     triangulate: TriangulateConfig
-    swap: SwapConfig
+    labelling: LabelConfig
     reconstruct: ReconstructConfig
-    relabel: RelabelConfig
 
 
 def default_config_path() -> Path:
@@ -59,10 +60,16 @@ def load_server_configs(path: str | os.PathLike | None = None, **sync_overrides)
         server=from_dict(ServerConfig, data.get("server", {}), f"{p} [server]"),
         sync=from_dict(SyncConfig, sync, f"{p} [sync]"),
         triangulate=from_dict(TriangulateConfig, data.get("triangulate", {}), f"{p} [triangulate]"),
-        swap=from_dict(SwapConfig, data.get("swap", {}), f"{p} [swap]"),
+        labelling=_label_config(data.get("labelling", {}), p),
         reconstruct=from_dict(ReconstructConfig, data.get("reconstruct", {}), f"{p} [reconstruct]"),
-        relabel=from_dict(RelabelConfig, data.get("relabel", {}), f"{p} [relabel]"),
     )
+
+
+def _label_config(table: dict, p: Path) -> LabelConfig:
+    """``[labelling]`` with its sub-table ``[labelling.points]``."""
+    table = dict(table)
+    points = from_dict(PointsConfig, table.pop("points", {}), f"{p} [labelling.points]")
+    return from_dict(LabelConfig, {**table, "points": points}, f"{p} [labelling]")
 
 
 def setup_logging(verbose: int) -> None:
@@ -79,11 +86,11 @@ def setup_logging(verbose: int) -> None:
 
 def make_reconstructor(db_path: str | None, config: ReconstructConfig | None = None):
     """A Reconstructor with the motion DB at ``db_path`` (or the shipped one), compiled and ready."""
-    from .reconstruct import Reconstructor
+    from .recon.reconstruct import Reconstructor
 
     db = None
     if db_path:
-        from .db import MotionDB
+        from .recon.db import MotionDB
 
         db = MotionDB.load(db_path)
     rec = Reconstructor(db=db, config=config)
@@ -101,8 +108,8 @@ def build_server(calibration: str | os.PathLike, configs: ServerConfigs, db: str
         server_cfg = ServerConfig(**{**server_cfg.__dict__, "max_lag_ms": 0.0})
     recorder = Recorder(record, metadata={"tool": "samba-server"}) if record else None
     return Server(rig, calibration_toml=toml, reconstructor=make_reconstructor(db, configs.reconstruct), config=server_cfg,
-                  sync_config=configs.sync, tri_config=configs.triangulate, swap_config=configs.swap,
-                  recorder=recorder, relabel_config=configs.relabel)
+                  sync_config=configs.sync, tri_config=configs.triangulate, label_config=configs.labelling,
+                  recorder=recorder)
 
 
 def export_joints(server: Server, path: str | os.PathLike) -> int:
@@ -203,30 +210,6 @@ def add_network_args(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--scouting", action="store_true", help="enable Zenoh multicast scouting")
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="samba-server", description="Live Samba server: mote packets in, skeleton out.")
-    ap.add_argument("--calibration", required=True, help="calibration.toml (camera names = mote ids)")
-    add_network_args(ap)
-    ap.add_argument("--record", metavar="TAKE.mcap", help="record packets, calibration and poses")
-    ap.add_argument("--export", metavar="JOINTS.npz", help="write every pose to joints.npz at exit")
-    ap.add_argument("--db", help="motion database (.npz) for the solver (default: the shipped one)")
-    ap.add_argument("--config", help="server TOML (default: the packaged configs/server.toml)")
-    ap.add_argument("--fps", type=float, help="nominal mote frame rate (overrides [sync] fps)")
-    ap.add_argument("--http", metavar="[HOST:]PORT", help="serve the browser viewer")
-    ap.add_argument("--duration", type=float, help="stop after this many seconds")
-    ap.add_argument("--status", action="store_true", help="print a live status line on stderr")
-    ap.add_argument("-v", "--verbose", action="count", default=0)
-    args = ap.parse_args(argv)
-    setup_logging(args.verbose)
-    try:
-        configs = load_server_configs(args.config, fps=args.fps)
-        server = build_server(args.calibration, configs, args.db, args.record)
-    except (ConfigError, CalibrationError, RecorderError, OSError, ValueError) as exc:
-        print(f"samba-server: {exc}", file=sys.stderr)
-        return 1
-    return run_live(server, args)
-
-
 def run_live(server: Server, args, extra_stop: threading.Event | None = None, on_tick=None,
              before_close=None) -> int:
     """Run ``server`` on Zenoh until Ctrl-C, SIGTERM or ``args.duration``; export/close at the end."""
@@ -277,6 +260,3 @@ def run_live(server: Server, args, extra_stop: threading.Event | None = None, on
             print(f"\nwrote {n} frames to {args.export}", file=sys.stderr)
     return code
 
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())

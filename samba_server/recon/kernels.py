@@ -733,7 +733,7 @@ def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, f
     markers: (8, 3) world metres, NaN rows unseen. History: n_hist (0-2) previous poses q1 (last),
     q2 (13, 3); has_pred: whether they are recent enough to predict from; has_state/R0/o0/d0: the
     last solved state; dt: seconds since the last pose. trees: per body part, the KD-tree arrays
-    (see :mod:`samba_server.kdtree`) over ``features`` (M, 27) columns feat_cols[p, :n_cols[p]]
+    (see :mod:`samba_server.recon.kdtree`) over ``features`` (M, 27) columns feat_cols[p, :n_cols[p]]
     (24 aligned marker coordinates, then world up in the marker frame times ``up_weight``).
     Returns (status, q (13, 3), R, o, dirs, iterations, rms marker residual, markers seen) with
     status 0 = solved, 1 = bridged (too few markers, temporal model), 2 = unsolved.

@@ -14,8 +14,7 @@ from samba_common.config import ConfigError
 from samba_common.formats import FormatError
 from samba_common.progress import Progress
 from samba_common.skeleton import BONE_TYPES
-
-from .db import MotionDB, build_db, default_db_path
+from samba_server.recon.db import MotionDB, build_db, default_db_path
 
 EXAMPLES = """examples:
   samba-db build ../shared/data/cmu-bvh --out samba_common/data/default_db.npz   # rebuild the shipped DB

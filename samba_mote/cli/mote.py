@@ -49,12 +49,11 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=[logging.WARNING, logging.INFO, logging.DEBUG][min(args.verbose, 2)],
                         format="%(asctime)s %(name)s %(levelname)s %(message)s")
     from samba_common.calib import CalibrationError, CameraRig
-
-    from .pipeline import MotePipeline, load_mote_config
-    from .runner import MoteRunner
-    from .sources import open_source
-    from .transports import (McapRecorder, Resilient, SerialTransport, TransportError, ZenohTransport,
-                             parse_serial_url)
+    from samba_mote.pipeline import MotePipeline, load_mote_config
+    from samba_mote.runner import MoteRunner
+    from samba_mote.sources import open_source
+    from samba_mote.transports import (McapRecorder, Resilient, SerialTransport, TransportError, ZenohTransport,
+                                       parse_serial_url)
 
     try:
         cfg = load_mote_config(args.config)

@@ -13,11 +13,9 @@ from samba_common.config import ConfigError, load_section
 from samba_common.formats import FormatError, load_markers, save_joints
 from samba_common.progress import Progress
 from samba_common.skeleton import BONE_TYPES
-
-from .db import MotionDB, load_default_db, sample_path
-from .export.csvfile import write_joints_csv
-from .proportions import ProportionError
-from .reconstruct import ReconstructConfig, reconstruct_take
+from samba_server.export.csvfile import write_joints_csv
+from samba_server.recon import (MotionDB, ProportionError, ReconstructConfig, load_default_db, reconstruct_take,
+                                sample_path)
 
 log = logging.getLogger(__name__)
 
@@ -79,6 +77,13 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     if not args.quiet:
         print(summary(info, len(take.t)))
+    solved = int(np.sum(info["status"] != "unsolved"))
+    if solved < 0.5 * len(take.t):
+        seen = np.isfinite(take.markers).all(axis=2).sum(axis=1)
+        why = (f"only {int(np.sum(seen >= 4))} frames have the 4 markers a pose needs"
+               if np.mean(seen >= 4) < 0.5 else "the solver could not follow the markers (see the residuals)")
+        print(f"samba-reconstruct: WARNING: only {solved} of {len(take.t)} frames solved: {why}", file=sys.stderr)
+        return 3
     return 0
 
 

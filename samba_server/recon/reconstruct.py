@@ -6,10 +6,10 @@ Per frame (:meth:`Reconstructor.solve`):
    (:mod:`samba_common.align`);
 2. K nearest database poses with a KD-tree over the database re-posed with the *subject's*
    bone lengths (:class:`PoseIndex`);
-3. N pseudo-poses per neighbour (:mod:`samba_server.pseudo`);
+3. N pseudo-poses per neighbour (:mod:`samba_server.recon.kernels`);
 4. local PCA over the pooled poses -> a Gaussian prior over bone directions;
 5. Levenberg–Marquardt on PCA prior + marker fit + temporal smoothness
-   (:mod:`samba_server.solver`), started from the better of the linear least-squares start of
+   (:mod:`samba_server.recon.kernels`), started from the better of the linear least-squares start of
    the thesis and the constant-velocity prediction;
 6. joints in world coordinates with the subject's fixed bone lengths.
 

@@ -2,10 +2,8 @@
 package, looped) publish marker packets over Zenoh on loopback to a live server on a free
 port; a status line shows fps, latency, motes alive and drops until Ctrl-C or ``--duration``.
 
-The shipped take ``samba_common/data/demo_take.npz`` is 8 s of joints derived from the CMU
-Graphics Lab Motion Capture Database (subject 2, trial 5). "The data used in this project
-was obtained from mocap.cs.cmu.edu. The database was created with funding from NSF
-EIA-0196217."
+The shipped take is :func:`samba_server.simmotes.load_demo_take`; the server is built and run
+by :mod:`samba_server.app`.
 """
 
 from __future__ import annotations
@@ -13,25 +11,14 @@ from __future__ import annotations
 import argparse
 import socket
 import sys
+import tempfile
 import threading
-from importlib.resources import files
-
-import numpy as np
+from pathlib import Path
 
 from samba_common.calib import default_rig
-
-from .server import Server
-from .server_cli import Status, build_server, load_server_configs, run_live, setup_logging
-
-
-def load_demo_take() -> tuple[np.ndarray, np.ndarray]:
-    """The shipped clip with the standard pose in front: ((F, 13, 3) m, (F,) s) at 60 fps."""
-    from samba_mote.sim.tpose import prepend_tpose
-
-    with files("samba_common").joinpath("data", "demo_take.npz").open("rb") as fh, np.load(fh) as z:
-        joints, t = z["joints"].astype(float), z["t"].astype(float)
-    j, t, _ = prepend_tpose(joints, t, 60.0)
-    return j, t
+from samba_server.app import Status, build_server, load_server_configs, run_live, setup_logging
+from samba_server.server import Server
+from samba_server.simmotes import SimMotes, SimNetwork, load_demo_take
 
 
 def free_port() -> int:
@@ -56,11 +43,6 @@ def main(argv: list[str] | None = None) -> int:
     if not 0.0 <= args.drop < 1.0:
         ap.error("--drop must be in [0, 1)")
     setup_logging(args.verbose)
-    from .simmotes import SimMotes, SimNetwork
-
-    import tempfile
-    from pathlib import Path
-
     rig = default_rig(args.motes)
     tmp = tempfile.TemporaryDirectory(prefix="samba-demo-")
     calib = Path(tmp.name) / "calibration.toml"

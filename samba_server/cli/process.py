@@ -1,0 +1,98 @@
+"""``samba-process``: the offline path, videos (one per camera) -> joints.npz through the same
+:class:`~samba_server.server.Server` as live (:func:`samba_server.process.process_videos`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from samba_common.calib import CalibrationError
+from samba_common.config import ConfigError
+from samba_common.formats import save_joints
+from samba_common.progress import Progress
+from samba_server.app import build_server, load_server_configs, setup_logging
+from samba_server.process import VideoError, _open_video, process_videos
+from samba_server.record import RecorderError
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="samba-process",
+                                 description="Offline: videos (one per camera) -> joints.npz, with the live code.")
+    ap.add_argument("calibration", help="calibration.toml (camera names = video file names)")
+    ap.add_argument("videos", nargs="+", help="cam0.avi cam1.avi ... (any format OpenCV reads)")
+    ap.add_argument("--out", required=True, help="output joints.npz")
+    ap.add_argument("--fps", type=float, help="frame rate of the videos (default: read from the files, else 30)")
+    ap.add_argument("--record", metavar="TAKE.mcap", help="also record the packets and poses as a take")
+    ap.add_argument("--db", help="motion database (.npz) (default: the shipped one)")
+    ap.add_argument("--config", help="server TOML (default: the packaged configs/server.toml)")
+    ap.add_argument("--mote-config", help="mote TOML for detection/tracking (default: built-in defaults)")
+    ap.add_argument("-v", "--verbose", action="count", default=0)
+    args = ap.parse_args(argv)
+    setup_logging(args.verbose)
+    videos = [Path(v) for v in args.videos]
+    if len({v.stem for v in videos}) != len(videos):
+        ap.error("two videos have the same camera name")
+    try:
+        fps = args.fps
+        if fps is None:
+            import cv2
+
+            cap = _open_video(videos[0])
+            fps = float(cap.get(cv2.CAP_PROP_FPS)) or 30.0
+            cap.release()
+            if not 1.0 <= fps <= 1000.0:
+                fps = 30.0
+        if fps <= 0:
+            ap.error("--fps must be > 0")
+        mote_config = None
+        if args.mote_config:
+            from samba_mote.pipeline import load_mote_config
+
+            mote_config = load_mote_config(args.mote_config)
+        configs = load_server_configs(args.config, fps=fps)
+        server = build_server(args.calibration, configs, args.db, args.record, live=False)
+        import cv2
+
+        total = 0
+        for v in videos:
+            cap = _open_video(v)
+            total = max(total, int(cap.get(cv2.CAP_PROP_FRAME_COUNT)))
+            cap.release()
+        with Progress(total, "samba-process") as bar:
+            joints, t, extra = process_videos(server, videos, fps, mote_config, bar)
+        if server.recorder is not None:
+            server.recorder.close()
+        save_joints(args.out, joints, t, **extra)
+    except (VideoError, CalibrationError, ConfigError, RecorderError, OSError, ValueError) as exc:
+        print(f"samba-process: {exc}", file=sys.stderr)
+        return 1
+    solved = int(np.isfinite(joints).all(axis=(1, 2)).sum())
+    print(f"wrote {args.out}: {len(t)} frames, {solved} solved", file=sys.stderr)
+    if solved < 0.5 * len(t):
+        print(f"samba-process: WARNING: only {solved} of {len(t)} frames solved: {failure_reason(server)}",
+              file=sys.stderr)
+        return 3
+    return 0
+
+
+def failure_reason(server) -> str:
+    """Why a take mostly failed, from the labelling stage's counters (one sentence)."""
+    st = server.labeller.stats
+    if st.frames == 0:
+        return "no frame was assembled from the videos (are they empty or unreadable?)"
+    seen = st.frames_with_points / st.frames
+    if seen < 0.5:
+        return (f"markers were seen by two cameras in only {100 * seen:.0f} % of frames (check the calibration, "
+                "that the cameras overlap, and the blobs with samba-mote --preview)")
+    if st.first_identified_t is None:
+        return ("the markers were never identified: no standard pose found and no frame showed enough of the body "
+                "(start the take with the standard pose, facing +Y, in view of every camera)")
+    return (f"markers identified at {st.first_identified_t:.2f} s but lost for most of the take "
+            f"({st.identifications} identifications; look at samba-inspect --plot)")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,174 @@
+"""Naming unlabelled 3D points as the 8 markers with no prediction: acquisition and recovery.
+
+Used for the first labelling of a take (the standard pose, any stance) and whenever the
+labels are lost (a blackout, the subject leaving and re-entering, a jump). The shoulders are
+the pair of high points a shoulder width apart; each ordering of the pair is one facing
+(the subject's right = facing x up). Legs are knee-ankle pairs a shin length apart, within
+reach of their side's shoulder; wrists are points within an arm of their shoulder. Every
+labelling these rigid lengths allow is scored:
+
+- +1 per marker named (a hidden marker may stay unnamed),
+- rigid-length errors, and trust in the points (2-view points that other views should have seen),
+- facing: agreement with the facing the subject had (the standard pose faces +Y; after a
+  loss, the last facing, trusted less the longer ago) and with the direction of travel,
+- anatomy: knees bend backwards, the left leg is on the left.
+
+The best labelling wins; its margin over the runner-up tells how sure the naming is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+
+from .rigid import LA, LK, LS, LW, RA, RK, RS, RW, Body
+
+__all__ = ["Hint", "Hypothesis", "identify"]
+
+_UP = np.array([0.0, 0.0, 1.0])
+
+
+@dataclass
+class Hint:
+    """What is known about the subject besides the points.
+
+    facing: (2,) unit horizontal facing direction, or None; facing_weight: how much it counts;
+    velocity: (3,) m/s of the body's centre over the last frames, or None.
+    """
+
+    facing: np.ndarray | None = None
+    facing_weight: float = 0.0
+    velocity: np.ndarray | None = None
+
+
+@dataclass
+class Hypothesis:
+    """labels: (8,) point index per marker (-1 = unnamed); score; facing (2,) unit."""
+
+    labels: np.ndarray
+    score: float
+    facing: np.ndarray
+
+
+def _unit2(v: np.ndarray) -> np.ndarray | None:
+    n = float(np.hypot(v[0], v[1]))
+    return None if n < 1e-6 else np.array([v[0], v[1]]) / n
+
+
+def _leg_options(X: np.ndarray, free: list[int], s: np.ndarray, body: Body) -> list[tuple[int, int, float]]:
+    """(knee, ankle, penalty) options for the side whose shoulder is at s: pairs a shin apart,
+    single points, or nothing."""
+    out: list[tuple[int, int, float]] = [(-1, -1, 0.0)]
+    reach_k = body.trunk + 2 * body.tol
+    reach_a = reach_k + body.shin
+    for k in free:
+        if np.linalg.norm(X[k] - s) > reach_k or X[k, 2] > s[2] - 0.2:
+            continue
+        out.append((k, -1, 0.0))
+        for a in free:
+            if a == k or X[a, 2] > X[k, 2] + 0.1:
+                continue
+            err = body.shin_error(X[k], X[a])
+            if err <= body.tol and np.linalg.norm(X[a] - s) <= reach_a:
+                out.append((k, a, 0.3 * (err / body.tol) ** 2))
+    for a in free:
+        if np.linalg.norm(X[a] - s) <= reach_a and X[a, 2] < s[2] - 0.6:
+            out.append((-1, a, 0.0))
+    return out
+
+
+def _share(left: int, right: int, shared: np.ndarray) -> tuple[int, int]:
+    """A merged point named for one side only is named for both."""
+    if left < 0 and right >= 0 and shared[right]:
+        return right, right
+    if right < 0 and left >= 0 and shared[left]:
+        return left, left
+    return left, right
+
+
+def _knee_bend(X: np.ndarray, s: np.ndarray, k: int, a: int, f: np.ndarray) -> float:
+    """How far the shank bends forwards relative to the thigh (0 for a normal knee)."""
+    if k < 0 or a < 0:
+        return 0.0
+    hip = s - np.array([0.0, 0.0, 0.5])
+    u = X[k] - hip
+    w = X[a] - X[k]
+    u /= max(np.linalg.norm(u), 1e-9)
+    w /= max(np.linalg.norm(w), 1e-9)
+    return max(0.0, float((w - u)[:2] @ f) - 0.15)
+
+
+def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = None,
+             shared: np.ndarray | None = None, max_points: int = 12, keep: int = 8) -> list[Hypothesis]:
+    """Labellings of points X (M, 3) world metres, best first (at most ``keep``).
+
+    trust: (M,) penalty in [0, 1] per point (0 = sure it is a marker, e.g. seen by >= 3
+    views). shared: (M,) bool, points that may stand for both knees or both ankles (seen only
+    in merged blobs): such a point named for one side with the other side unnamed is named
+    for both (the caller splits it). Needs both shoulders; returns [] when no pair of points
+    can be the shoulders.
+    """
+    shared = np.zeros(len(X), bool) if shared is None else np.asarray(shared, bool)
+    hint = hint or Hint()
+    M = len(X)
+    if M < 2:
+        return []
+    idx = list(np.argsort(trust, kind="stable")[:max_points])
+    hyps: dict[tuple, Hypothesis] = {}
+    zs = X[:, 2]
+    for i, j in combinations(idx, 2):
+        if min(zs[i], zs[j]) < 0.6 or abs(zs[i] - zs[j]) > 0.35 or body.width_error(X[i], X[j]) > body.tol:
+            continue
+        for L, R in ((i, j), (j, i)):
+            f = _unit2(np.cross(_UP, X[R] - X[L]))
+            if f is None:
+                continue
+            r = np.array([f[1], -f[0]])  # the subject's right, horizontal
+            base = 2.0 - 0.3 * (body.width_error(X[L], X[R]) / body.tol) ** 2 - trust[L] - trust[R]
+            if hint.facing is not None:
+                base -= hint.facing_weight * (1.0 - float(f @ hint.facing))
+            if hint.velocity is not None and np.hypot(*hint.velocity[:2]) > 0.5:
+                v = hint.velocity[:2] / np.hypot(*hint.velocity[:2])
+                base -= 1.5 * max(0.0, -float(f @ v) - 0.2)
+            free = [p for p in idx if p not in (L, R)]
+            legs_l = _leg_options(X, free, X[L], body)
+            legs_r = _leg_options(X, free, X[R], body)
+            pairs = []
+            for kl, al, pl in legs_l:
+                for kr, ar, pr in legs_r:
+                    used = [p for p in (kl, al, kr, ar) if p >= 0]
+                    if len(set(used)) < len(used):
+                        continue
+                    sc = len(used) - pl - pr - sum(trust[p] for p in used)
+                    sc -= 2.0 * (_knee_bend(X, X[L], kl, al, f) + _knee_bend(X, X[R], kr, ar, f))
+                    for a, b in ((kl, kr), (al, ar)):
+                        if a >= 0 and b >= 0:
+                            sc -= 1.0 * max(0.0, -float((X[b] - X[a])[:2] @ r) - 0.05)
+                    kl, kr = _share(kl, kr, shared)
+                    al, ar = _share(al, ar, shared)
+                    pairs.append((sc, kl, al, kr, ar))
+            pairs.sort(key=lambda p: -p[0])
+            for sc, kl, al, kr, ar in pairs[:4]:
+                taken = {L, R, kl, al, kr, ar}
+                rest = [p for p in free if p not in taken]
+                wl = [-1] + [p for p in rest if np.linalg.norm(X[p] - X[L]) <= body.reach + body.tol]
+                wr = [-1] + [p for p in rest if np.linalg.norm(X[p] - X[R]) <= body.reach + body.tol]
+                for a in wl:
+                    for b in wr:
+                        if a >= 0 and a == b:
+                            continue
+                        s = base + sc
+                        for w in (a, b):
+                            if w >= 0:
+                                s += 1.0 - trust[w]
+                        if a >= 0 and b >= 0:
+                            s -= 0.3 * max(0.0, -float((X[b] - X[a])[:2] @ r) - 0.1)
+                        labels = np.full(8, -1, np.int64)
+                        labels[[LS, RS, LW, RW, LK, RK, LA, RA]] = (L, R, a, b, kl, kr, al, ar)
+                        key = tuple(labels)
+                        if key not in hyps or hyps[key].score < s:
+                            hyps[key] = Hypothesis(labels, float(s), f)
+    out = sorted(hyps.values(), key=lambda h: -h.score)
+    return out[:keep]

@@ -1,0 +1,385 @@
+"""The labelling stage of the server: packets of one frame -> the 8 named 3D markers.
+
+:class:`Labeller` keeps one track per marker (position, velocity, when last seen). Per frame:
+
+1. unlabelled 3D points from every view's blobs (:mod:`.points`);
+2. **tracking**: each marker is predicted (its track at constant velocity while it was seen
+   recently, else the reconstructed skeleton's joint, which the solver keeps moving with the
+   body) and the points are named by an optimal assignment (Hungarian) of points to predicted
+   markers within a gate that grows with the time since the marker was seen. The motes' labels
+   lower the cost of agreeing assignments a little: evidence, not orders. Assignments that break
+   a rigid distance of the subject (:mod:`.rigid`) or flip the facing in one frame are dropped;
+3. **identification** (:mod:`.identify`) when fewer than ``min_tracked`` markers can be
+   predicted (the start of a take, after a blackout or once the subject left the volume), or
+   when tracking explains too few of the points for ``lost_after`` s (a jump): the points are
+   named from scratch, the labelling accepted at once when its margin is clear, else after
+   ``max_wait`` s with the best one.
+
+Every frame gets a :class:`LabelQuality`. All decisions depend only on the frame's packets,
+its time and what the server fed back (solved joints, body lengths), so a replay gives the
+live labels exactly.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from samba_common.calib import CameraRig
+from samba_common.skeleton import MARKER_JOINT, N_MARKERS
+
+from ..triangulate import Triangulator
+from .blobs import view_blobs
+from .identify import Hint, identify
+from .points import PointReconstructor, Points3D, PointsConfig
+from .rigid import LA, LK, LS, LW, RA, RK, RS, RW, Body
+
+log = logging.getLogger(__name__)
+
+__all__ = ["LabelConfig", "LabelQuality", "LabelStats", "Labeller"]
+
+
+@dataclass(frozen=True)
+class LabelConfig:
+    """``[labelling]`` in configs/server.toml (distances in metres, times in seconds)."""
+
+    gate_m: float = 0.10  #: largest distance between a point and its marker's prediction, just after it was seen
+    gate_growth: float = 1.5  #: m/s: the gate grows with the time since the marker was seen ...
+    max_gate_m: float = 0.30  #: ... up to this
+    skeleton_gate_m: float = 0.15  #: gate around a prediction taken from the reconstructed skeleton
+    hint_m: float = 0.01  #: a view whose mote gave the same label lowers the cost by this
+    merged_m: float = 0.02  #: a point seen in a merged blob costs this much more
+    unexplained_m: float = 0.03  #: a 2-view point costs this much more per view that should have seen it
+    merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it
+    track_timeout: float = 0.12  #: a marker unseen for longer is predicted from the skeleton
+    skeleton_max_age: float = 0.4  #: the skeleton predicts markers up to this long after the last solved pose
+    min_tracked: int = 3  #: fewer predictable markers: identify from the points
+    lost_after: float = 0.3  #: this long with most points unexplained: identify again
+    min_points: int = 4  #: points needed to identify
+    min_margin: float = 0.6  #: an identification this much better than the runner-up is taken at once
+    max_wait: float = 0.2  #: else the best one is taken after this long
+    facing_weight: float = 3.0  #: weight of the known facing when identifying ...
+    facing_decay: float = 3.0  #: ... decaying with this time constant since it was known
+    first_facing_weight: float = 1.0  #: before any labelling: the standard pose faces +Y
+    rigid_abs_tol: float = 0.05  #: rigid distances may differ by this ...
+    rigid_rel_tol: float = 0.03  #: ... plus this fraction of half the body height
+    points: PointsConfig = field(default_factory=PointsConfig)
+
+
+@dataclass
+class LabelQuality:
+    """How sure the labels of one frame are.
+
+    n_labelled: markers named; n_points: 3D points found; margin_m: the smallest gap between a
+    named marker's assignment cost and its runner-up's (metres; identification margins are
+    converted at 0.1 m per score unit); residual_m: rms distance between named markers and
+    their predictions; mode: "tracking", "identified" or "lost"; overridden: named markers
+    whose blob a mote had labelled otherwise.
+    """
+
+    n_labelled: int = 0
+    n_points: int = 0
+    margin_m: float = float("nan")
+    residual_m: float = float("nan")
+    mode: str = "lost"
+    overridden: int = 0
+
+
+@dataclass
+class LabelStats:
+    """Counters of one run: frames, frames with >= 2 points, identifications (first and
+    re-acquisitions), overridden mote labels, and each re-acquisition's delay (s) from the
+    first frame with points after the labels were lost to the frame they came back."""
+
+    frames: int = 0
+    frames_with_points: int = 0
+    identifications: int = 0
+    overridden: int = 0
+    reacquire_s: list[float] = field(default_factory=list)
+    first_identified_t: float | None = None
+
+
+class Labeller:
+    """See the module docstring. rig: the calibration; triangulator: the server's (shares its
+    undistortion tables)."""
+
+    def __init__(self, rig: CameraRig, triangulator: Triangulator | None = None, config: LabelConfig | None = None):
+        self.rig = rig
+        self.config = config or LabelConfig()
+        self.points = PointReconstructor(rig, triangulator or Triangulator(rig), self.config.points)
+        self.stats = LabelStats()
+        self._body = Body.from_lengths(None, self.config.rigid_abs_tol, self.config.rigid_rel_tol)
+        self._lengths_key: bytes | None = None
+        self._pos = np.full((N_MARKERS, 3), np.nan)
+        self._vel = np.zeros((N_MARKERS, 3))
+        self._seen = np.full(N_MARKERS, -np.inf)
+        self._skel: list[tuple[float, np.ndarray]] = []
+        self._facing: np.ndarray | None = None
+        self._t_facing = -np.inf
+        self._centres: list[tuple[float, np.ndarray]] = []
+        self._t_good = -np.inf          # last frame where tracking explained the points
+        self._t_lost: float | None = None  # first frame with points after the labels were lost
+        self._t_ambiguous: float | None = None
+        self._shared = np.zeros(N_MARKERS, bool)
+
+    # ------------------------------------------------------------------ feedback from the server
+    def observe(self, t: float, joints: np.ndarray) -> None:
+        """Remember a solved pose: t seconds, joints (13, 3) metres (NaN frames are ignored)."""
+        if np.all(np.isfinite(joints)):
+            self._skel = (self._skel + [(t, joints[list(MARKER_JOINT)].copy())])[-2:]
+
+    def set_lengths(self, lengths: np.ndarray | None) -> None:
+        """The subject's bone lengths (8,) (BONE_TYPES order) once measured; None keeps the default body."""
+        if lengths is None:
+            return
+        key = np.asarray(lengths, float).tobytes()
+        if key != self._lengths_key:
+            self._lengths_key = key
+            self._body = Body.from_lengths(lengths, self.config.rigid_abs_tol, self.config.rigid_rel_tol)
+
+    def reset(self) -> None:
+        """Forget every label (e.g. a new subject); keeps the body."""
+        self._pos[:] = np.nan
+        self._seen[:] = -np.inf
+        self._skel = []
+        self._facing = None
+        self._t_lost = self._t_ambiguous = None
+
+    # ------------------------------------------------------------------ per frame
+    def label(self, packets: list, t: float) -> tuple[np.ndarray, LabelQuality]:
+        """Name the markers of one frame. packets: per camera (rig order) a MarkerPacket or None;
+        t: seconds. Returns ((8, 3) world metres, NaN = not named; quality)."""
+        self.stats.frames += 1
+        pts = self.points.reconstruct([view_blobs(p) for p in packets])
+        if len(pts) >= 2:
+            self.stats.frames_with_points += 1
+            self._centres = [c for c in self._centres if t - c[0] <= 0.5] + [(t, pts.X.mean(axis=0))]
+        pred, gate = self._predict(t)
+        n_pred = int(np.isfinite(pred).all(axis=1).sum())
+        q = LabelQuality(n_points=len(pts))
+        out = np.full((N_MARKERS, 3), np.nan)
+        if n_pred >= self.config.min_tracked and len(pts):
+            out, q = self._track(pts, pred, gate, t)
+            explained = q.n_labelled >= min(len(pts), N_MARKERS) - 2 or q.n_labelled >= 6
+            if explained:
+                self._t_good = t
+            if t - self._t_good <= self.config.lost_after:
+                self._update(out, t, shared=self._shared)
+                return out, q
+            log.debug("t=%.3f: tracking explains %d of %d points: identifying again", t, q.n_labelled, len(pts))
+        if self._t_lost is None and len(pts) >= 2:
+            self._t_lost = t
+        found = self._identify(pts, t)
+        if found is not None:
+            out, q = found
+            self._update(out, t, reset=True)
+            self._t_good = t
+        else:
+            q = LabelQuality(n_points=len(pts), mode="lost")
+        return out, q
+
+    def _predict(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        cfg = self.config
+        pred = np.full((N_MARKERS, 3), np.nan)
+        gate = np.zeros(N_MARKERS)
+        age = t - self._seen
+        recent = age <= cfg.track_timeout
+        pred[recent] = self._pos[recent] + self._vel[recent] * age[recent, None]
+        gate[recent] = np.minimum(cfg.gate_m + cfg.gate_growth * age[recent], cfg.max_gate_m)
+        skel = self._skeleton(t)
+        if skel is not None:
+            use = ~recent & np.isfinite(skel).all(axis=1)
+            pred[use] = skel[use]
+            gate[use] = cfg.skeleton_gate_m
+        return pred, gate
+
+    def _skeleton(self, t: float) -> np.ndarray | None:
+        if not self._skel or t - self._skel[-1][0] > self.config.skeleton_max_age:
+            return None
+        t1, m1 = self._skel[-1]
+        if len(self._skel) == 1:
+            return m1
+        t0, m0 = self._skel[0]
+        if t1 <= t0:
+            return m1
+        return m1 + (m1 - m0) * min(t - t1, 0.1) / (t1 - t0)
+
+    def _track(self, pts: Points3D, pred: np.ndarray, gate: np.ndarray, t: float) -> tuple[np.ndarray, LabelQuality]:
+        cfg = self.config
+        P = len(pts)
+        # a point seen only in merged blobs may stand for two markers: it gets a second row
+        row_pt = np.r_[np.arange(P), np.flatnonzero(pts.merged_all)]
+        Pr = len(row_pt)
+        X = pts.X[row_pt]
+        d = np.linalg.norm(X[:, None, :] - pred[None, :, :], axis=2)  # (Pr, 8)
+        half = np.where(pts.merged_all[row_pt], cfg.merged_half_m, 0.0)[:, None]
+        d_eff = np.maximum(d - half, 0.0)
+        ghostly = np.where(pts.n_views[row_pt] < 3, np.minimum(pts.unexplained[row_pt], 2), 0)
+        cost = d_eff - cfg.hint_m * pts.votes[row_pt] + cfg.merged_m * pts.merged[row_pt, None] \
+            + cfg.unexplained_m * ghostly[:, None]
+        ok = np.isfinite(d) & (d_eff <= gate[None, :])
+        big = 1e3
+        full = np.full((Pr, N_MARKERS + Pr), big)
+        full[:, :N_MARKERS] = np.where(ok, cost, big)
+        full[np.arange(Pr), N_MARKERS + np.arange(Pr)] = cfg.max_gate_m
+        rows, cols = linear_sum_assignment(full)
+        arow = np.full(N_MARKERS, -1, np.int64)
+        for r, c in zip(rows, cols):
+            if c < N_MARKERS and ok[r, c]:
+                arow[c] = r
+        assign = np.where(arow >= 0, row_pt[np.maximum(arow, 0)], -1)
+        # a marker left out whose prediction sits by a named neighbour's point, close to that
+        # neighbour's prediction, is in the same blob in every view: it shares the point
+        free = np.setdiff1d(np.arange(P), assign[assign >= 0])
+        for n in np.flatnonzero((assign < 0) & np.isfinite(pred).all(axis=1)):
+            if free.size and np.min(np.linalg.norm(pts.X[free] - pred[n], axis=1)) <= gate[n] + 0.1:
+                continue  # a point of its own may be there: no sharing
+            best = None
+            for m in np.flatnonzero(assign >= 0):
+                if np.count_nonzero(assign == assign[m]) > 1 or not pts.merged[assign[m]]:
+                    continue
+                sep = float(np.linalg.norm(pred[m] - pred[n]))
+                dn = float(np.linalg.norm(pts.X[assign[m]] - pred[n]))
+                if sep <= 2 * cfg.merged_half_m + 0.04 and dn <= gate[n] + cfg.merged_half_m and \
+                        (best is None or dn < best[0]):
+                    best = (dn, m)
+            if best is not None:
+                assign[n], arow[n] = assign[best[1]], arow[best[1]]
+        out = np.full((N_MARKERS, 3), np.nan)
+        out[assign >= 0] = pts.X[assign[assign >= 0]]
+        right = None
+        if self._facing is not None and t - self._t_facing <= 0.5:
+            right = np.array([self._facing[1], -self._facing[0], 0.0])
+        _split_shared(out, assign, pred, cfg.merged_half_m, right)
+        self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
+        # rigid distances and facing: drop the worse-predicted marker of a violating group
+        for group in self._body.violations(out):
+            worst = max(group, key=lambda m: d[arow[m], m])
+            out[worst] = np.nan
+            assign[worst] = arow[worst] = -1
+        if assign[LS] >= 0 and assign[RS] >= 0 and self._facing is not None:
+            f = _facing(out[LS], out[RS])
+            if f is not None and float(f @ self._facing) < -0.3:
+                out[[LS, RS]] = np.nan
+                assign[[LS, RS]] = arow[[LS, RS]] = -1
+        named = np.flatnonzero(assign >= 0)
+        margin = float("nan")
+        if named.size:
+            gaps = []
+            for m in named:
+                col = np.where(ok[:, m] & (row_pt != assign[m]), cost[:, m], np.inf)
+                runner = min(float(np.min(col)), float(gate[m]))
+                gaps.append(runner - cost[arow[m], m])
+            margin = float(min(gaps))
+        over = int(sum(1 for m in named if pts.votes[assign[m]].sum() > pts.votes[assign[m], m]))
+        self.stats.overridden += over
+        resid = float(np.sqrt(np.mean(d_eff[arow[named], named] ** 2))) if named.size else float("nan")
+        return out, LabelQuality(int(named.size), P, margin, resid, "tracking", over)
+
+    def _identify(self, pts: Points3D, t: float) -> tuple[np.ndarray, LabelQuality] | None:
+        cfg = self.config
+        if len(pts) < cfg.min_points:
+            return None
+        trust = np.where(pts.n_views >= 3, 0.0, np.minimum(0.6 * pts.unexplained, 1.5))
+        hint = Hint()
+        if self._facing is not None:
+            hint.facing = self._facing
+            hint.facing_weight = cfg.facing_weight * math.exp(-(t - self._t_facing) / cfg.facing_decay)
+        elif self.stats.identifications == 0:
+            hint.facing, hint.facing_weight = np.array([0.0, 1.0]), cfg.first_facing_weight
+        if len(self._centres) >= 2 and self._centres[-1][0] - self._centres[0][0] >= 0.2:
+            (t0, c0), (t1, c1) = self._centres[0], self._centres[-1]
+            hint.velocity = (c1 - c0) / (t1 - t0)
+        hyps = identify(pts.X, trust, self._body, hint, shared=pts.merged_all)
+        if not hyps:
+            self._t_ambiguous = None
+            return None
+        best = hyps[0]
+        margin = best.score - hyps[1].score if len(hyps) > 1 else best.score
+        if margin < cfg.min_margin:
+            if self._t_ambiguous is None:
+                self._t_ambiguous = t
+            if t - self._t_ambiguous < cfg.max_wait:
+                return None
+        self._t_ambiguous = None
+        out = np.full((N_MARKERS, 3), np.nan)
+        named = best.labels >= 0
+        out[named] = pts.X[best.labels[named]]
+        right = np.array([best.facing[1], -best.facing[0], 0.0])
+        _split_shared(out, best.labels, np.zeros((N_MARKERS, 3)), cfg.merged_half_m, right)
+        self.stats.identifications += 1
+        if self.stats.first_identified_t is None:
+            self.stats.first_identified_t = t
+        elif self._t_lost is not None:
+            self.stats.reacquire_s.append(t - self._t_lost)
+        self._t_lost = None
+        log.info("t=%.3f s: markers identified from %d points (%d named, margin %.2f)", t, len(pts),
+                 int(named.sum()), margin)
+        return out, LabelQuality(int(named.sum()), len(pts), 0.1 * margin, 0.0, "identified", 0)
+
+    def _update(self, out: np.ndarray, t: float, reset: bool = False, shared: np.ndarray | None = None) -> None:
+        """Move the tracks to the named markers out (8, 3); shared (8,) bool: markers placed
+        either side of a merged point, whose positions are partly a guess."""
+        named = np.isfinite(out).all(axis=1)
+        if reset:
+            self._pos[:] = np.nan
+            self._seen[:] = -np.inf
+            self._vel[:] = 0.0
+        for m in np.flatnonzero(named):
+            dt = t - self._seen[m]
+            if shared is not None and shared[m]:
+                self._vel[m] *= 0.5
+                self._pos[m], self._seen[m] = out[m], t
+                continue
+            if 0 < dt <= self.config.track_timeout and np.isfinite(self._pos[m]).all():
+                v = (out[m] - self._pos[m]) / dt
+                self._vel[m] = 0.5 * self._vel[m] + 0.5 * v
+                speed = float(np.linalg.norm(self._vel[m]))
+                if speed > 8.0:
+                    self._vel[m] *= 8.0 / speed
+            else:
+                self._vel[m] = 0.0
+            self._pos[m] = out[m]
+            self._seen[m] = t
+        if named[LS] and named[RS]:
+            f = _facing(out[LS], out[RS])
+            if f is not None:
+                self._facing, self._t_facing = f, t
+
+
+def _split_shared(out: np.ndarray, assign: np.ndarray, pred: np.ndarray, half: float,
+                  right: np.ndarray | None = None) -> None:
+    """Markers named to the same (merged) point: place them either side of it, at most ``half``
+    m from it, along the subject's right (3,) for a left/right pair when it is known, else along
+    the difference of their predictions (8, 3). out (8, 3) in place."""
+    for p in np.unique(assign[assign >= 0]):
+        ms = np.flatnonzero(assign == p)
+        if len(ms) != 2:
+            continue
+        m, n = ms
+        off = 0.5 * (pred[m] - pred[n])
+        norm = float(np.linalg.norm(off))
+        if right is not None and (m, n) in _LR_PAIRS:
+            size = min(norm, half) if np.isfinite(norm) and norm > 0.02 else half
+            off = -size * right  # m is the left one
+        elif not np.isfinite(norm) or norm < 1e-9:
+            continue
+        else:
+            off = off * min(1.0, half / norm)
+        out[m] = out[m] + off
+        out[n] = out[n] - off
+
+
+_LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
+
+
+def _facing(left: np.ndarray, right: np.ndarray) -> np.ndarray | None:
+    """Horizontal unit facing of a body whose shoulders are at left, right (facing = up x right)."""
+    r = right - left
+    f = np.array([-r[1], r[0]])
+    n = float(np.hypot(*f))
+    return None if n < 1e-6 else f / n

@@ -1,0 +1,76 @@
+"""What is rigid for one subject, as marker distances: shin, shoulder width, arm reach.
+
+Markers sit on joints (docs/formats.md), so the knee-ankle marker distance is the shin, the
+shoulder-shoulder distance the shoulder width, and a wrist is never farther from its shoulder
+than the arm (upper arm + forearm). Before the subject is measured the database's mean body
+stands in, with wider tolerances.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from samba_common.skeleton import BONE_TYPES, M
+
+__all__ = ["Body", "DEFAULT_LENGTHS", "LS", "RS", "LW", "RW", "LK", "RK", "LA", "RA", "SIDES"]
+
+LS, RS, LW, RW, LK, RK, LA, RA = (M[n] for n in ("left_shoulder", "right_shoulder", "left_wrist", "right_wrist",
+                                                 "left_knee", "right_knee", "left_ankle", "right_ankle"))
+#: (shoulder, wrist, knee, ankle) marker indices of the left and right side
+SIDES = ((LS, LW, LK, LA), (RS, RW, RK, RA))
+_B = {n: i for i, n in enumerate(BONE_TYPES)}
+#: an adult of average build (m), BONE_TYPES order, for before the subject is measured
+DEFAULT_LENGTHS = np.array([0.34, 0.20, 0.50, 0.25, 0.28, 0.26, 0.44, 0.43])
+
+
+@dataclass(frozen=True)
+class Body:
+    """Rigid marker distances of one subject with their tolerances (m).
+
+    measured: the lengths are this subject's (tight tolerances) rather than a default body.
+    """
+
+    shin: float
+    shoulder_width: float
+    reach: float
+    trunk: float  #: shoulder to knee of the same side, at most (torso + thigh)
+    tol: float
+    measured: bool
+
+    @staticmethod
+    def from_lengths(lengths: np.ndarray | None, abs_tol: float = 0.05, rel_tol: float = 0.03) -> "Body":
+        """Body from (8,) bone lengths in BONE_TYPES order, or the default body when None."""
+        measured = lengths is not None
+        ln = np.asarray(lengths if measured else DEFAULT_LENGTHS, float)
+        scale = ln[_B["shin"]] + ln[_B["thigh"]] + ln[_B["torso"]]
+        tol = abs_tol + (rel_tol if measured else 0.15) * 0.5 * scale
+        return Body(shin=float(ln[_B["shin"]]), shoulder_width=float(ln[_B["shoulder_width"]]),
+                    reach=float(ln[_B["upper_arm"]] + ln[_B["forearm"]]),
+                    trunk=float(np.hypot(ln[_B["torso"]], 0.5 * (ln[_B["shoulder_width"]] - ln[_B["hip_width"]]))
+                                + ln[_B["thigh"]]),
+                    tol=float(tol), measured=measured)
+
+    def shin_error(self, knee: np.ndarray, ankle: np.ndarray) -> float:
+        return abs(float(np.linalg.norm(knee - ankle)) - self.shin)
+
+    def width_error(self, left: np.ndarray, right: np.ndarray) -> float:
+        return abs(float(np.linalg.norm(left - right)) - self.shoulder_width)
+
+    def violations(self, markers: np.ndarray) -> list[tuple[int, ...]]:
+        """Groups of labelled markers (8, 3) (NaN = unlabelled) that break a rigid distance."""
+        seen = np.isfinite(markers).all(axis=1)
+        out: list[tuple[int, ...]] = []
+        if seen[LS] and seen[RS] and self.width_error(markers[LS], markers[RS]) > self.tol:
+            out.append((LS, RS))
+        for s, w, k, a in SIDES:
+            if seen[k] and seen[a] and self.shin_error(markers[k], markers[a]) > self.tol:
+                out.append((k, a))
+            if seen[s] and seen[w] and np.linalg.norm(markers[w] - markers[s]) > self.reach + self.tol:
+                out.append((w,))
+            if seen[s] and seen[k] and np.linalg.norm(markers[k] - markers[s]) > self.trunk + 2 * self.tol:
+                out.append((k,))
+            if seen[s] and seen[a] and np.linalg.norm(markers[a] - markers[s]) > self.trunk + self.shin + 2 * self.tol:
+                out.append((a,))
+        return out

@@ -1,0 +1,145 @@
+"""The server's 3D-first marker identification (samba_server/labelling) on synthetic frames:
+packets made by projecting known markers into the default rig, with clutter, swapped mote
+labels, merged blobs and blackouts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from samba_common.calib import default_rig
+from samba_common.skeleton import MARKER_JOINT
+from samba_common.wire import FLAG_TRACKED, UNLABELLED, MarkerPacket
+from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
+from samba_mote.sim.tpose import stance_offset, tpose
+from samba_server.labelling import Labeller
+from samba_server.labelling.blobs import view_blobs
+from samba_server.labelling.points import PointReconstructor
+from samba_server.triangulate import Triangulator
+
+FPS = 60.0
+
+
+def _packets(rig, markers, t, rng, labels=None, distractors=None, noise_px=0.1):
+    """One MarkerPacket per camera: the markers (8, 3) projected (NaN rows unseen), area 9 px,
+    labelled with ``labels`` (8,) per camera or unlabelled, plus static distractor pixels."""
+    out = []
+    for c, cam in enumerate(rig.cameras):
+        seen = np.isfinite(markers).all(axis=1)
+        uv = cam.project(np.where(seen[:, None], markers, 0.0))[seen] + rng.normal(0, noise_px, (int(seen.sum()), 2))
+        lab = np.full(len(uv), UNLABELLED, np.uint8) if labels is None else np.asarray(labels[c], np.uint8)[seen]
+        if distractors is not None:
+            uv = np.vstack([uv, distractors[c]])
+            lab = np.r_[lab, np.full(len(distractors[c]), UNLABELLED, np.uint8)]
+        flags = np.where(lab != UNLABELLED, FLAG_TRACKED, 0).astype(np.uint8)
+        out.append(MarkerPacket(cam.name, 0, int(t * 1e9), 160, 120, 100, lab, uv.astype(np.float32),
+                                np.full(len(uv), 9, np.uint16), flags))
+    return out
+
+
+def _run(labeller, rig, markers, rng, **kw):
+    named = []
+    for i, m in enumerate(markers):
+        got, _q = labeller.label(_packets(rig, m, i / FPS, rng, **kw), i / FPS)
+        named.append(got)
+    return np.array(named)
+
+
+def _right(named, truth, tol=0.02):
+    """(F, 8) bool: the marker is named and within tol of its truth."""
+    return np.isfinite(named).all(axis=2) & (np.linalg.norm(named - truth, axis=2) <= tol)
+
+
+@pytest.mark.parametrize("stance", ["together", "hip"])
+def test_standard_pose_in_any_stance_is_identified_in_3d(stance):
+    """Feet together or at hip width, no mote label at all: every marker named from the 3D points."""
+    rig = default_rig(4)
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset(stance, float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    rng = np.random.default_rng(0)
+    named = _run(Labeller(rig), rig, np.repeat(pose[None], 20, axis=0), rng)
+    right = _right(named, pose[None])
+    assert right[-5:].all(), named[-1] - pose  # named within the first frames, then kept
+    assert not (np.isfinite(named).all(axis=2) & ~right).any()  # never a wrong name
+
+
+def _motion(seconds=4.0):
+    joints, _t = synthetic_motion(seconds, FPS)
+    return joints[:, list(MARKER_JOINT)]
+
+
+def test_take_starting_mid_motion_after_a_blackout_is_identified():
+    """No standard pose: the take starts in a blackout, then mid-motion; the markers are named
+    from the 3D points alone within half a second and stay right."""
+    rig = default_rig(4)
+    truth = _motion()
+    shown = truth.copy()
+    shown[:30] = np.nan  # 0.5 s of nothing
+    named = _run(Labeller(rig), rig, shown, np.random.default_rng(1))
+    right = _right(named, truth).all(axis=1)
+    first = int(np.argmax(right))
+    assert right.any() and (first - 30) / FPS <= 0.5
+    wrong = np.isfinite(named).all(axis=2) & ~_right(named, truth, 0.05)
+    assert not wrong[first:].any()
+
+
+def test_blackout_mid_take_reacquires_and_names_nothing_meanwhile():
+    rig = default_rig(4)
+    truth = _motion()
+    shown = truth.copy()
+    shown[100:160] = np.nan  # a 1 s blackout
+    lab = Labeller(rig)
+    named = _run(lab, rig, shown, np.random.default_rng(2))
+    assert not np.isfinite(named[100:160]).any()
+    back = _right(named[160:], truth[160:]).all(axis=1)
+    assert back.any() and np.argmax(back) / FPS <= 0.5
+    assert lab.stats.reacquire_s and lab.stats.reacquire_s[-1] <= 0.5
+
+
+def test_swap_injected_in_one_mote_is_overridden_by_3d():
+    """One mote labels the two wrists the wrong way round for the whole take: the other views
+    and the tracked body win, and the override is counted."""
+    rig = default_rig(4)
+    truth = _motion(2.0)
+    labels = np.tile(np.arange(8), (4, 1))
+    labels[1, [2, 3]] = [3, 2]
+    lab = Labeller(rig)
+    named = _run(lab, rig, truth, np.random.default_rng(3), labels=labels)
+    right = _right(named, truth).all(axis=1)
+    assert right[20:].mean() >= 0.99
+    assert lab.stats.overridden > 0
+
+
+def test_clutter_of_ten_distractors_per_view():
+    rig = default_rig(4)
+    truth = _motion(2.0)
+    rng = np.random.default_rng(4)
+    clutter = [np.c_[rng.uniform(2, 158, 10), rng.uniform(2, 118, 10)] for _ in range(4)]
+    named = _run(Labeller(rig), rig, truth, rng, distractors=clutter)
+    right = _right(named, truth).all(axis=1)
+    assert right[20:].mean() >= 0.98
+    assert not (np.isfinite(named).all(axis=2) & ~_right(named, truth, 0.05)).any()
+
+
+def test_points_merged_blob_stands_for_two_markers_and_clutter_is_bounded():
+    """Two markers closer than a blob in every view give one point flagged as two; 20 blobs
+    per view of clutter still give a bounded number of points."""
+    rig = default_rig(4)
+    tri = Triangulator(rig)
+    pr = PointReconstructor(rig, tri)
+    rng = np.random.default_rng(5)
+    pts = np.array([[0.0, 0.0, 1.5], [0.5, 0.0, 1.5], [-0.5, 0.0, 1.5], [0.0, 0.3, 1.0], [0.0, -0.3, 0.5]])
+    packets = []
+    for cam in rig.cameras:
+        uv = cam.project(pts)
+        area = np.array([9, 9, 9, 9, 20], np.uint16)  # the last blob holds two markers
+        clutter = np.c_[rng.uniform(2, 158, 20), rng.uniform(2, 118, 20)]
+        uv = np.vstack([uv, clutter]).astype(np.float32)
+        area = np.r_[area, np.full(20, 9, np.uint16)]
+        packets.append(MarkerPacket(cam.name, 0, 0, 160, 120, 100, np.full(len(uv), UNLABELLED, np.uint8), uv, area,
+                                    np.zeros(len(uv), np.uint8)))
+    got = pr.reconstruct([view_blobs(p) for p in packets])
+    assert len(got) <= pr.config.max_points
+    for p in pts:
+        d = np.linalg.norm(got.X - p, axis=1)
+        assert d.min() < 0.01 and got.n_views[np.argmin(d)] == 4
+    assert got.merged_all[np.argmin(np.linalg.norm(got.X - pts[-1], axis=1))]
