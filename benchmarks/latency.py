@@ -5,7 +5,7 @@ machine and clock; the server runs here. Latency is ``publish time - frame time`
 frame time is the mean corrected capture time of the frame's packets (it trails the true
 capture by the minimum transport latency, about 0.15 ms on loopback). Two configurations:
 
-- ``pipeline``: ingest, sync, triangulation, swap check, publish (no skeleton solve);
+- ``pipeline``: ingest, sync, labelling (3D points named as markers), publish (no skeleton solve);
 - ``full``: the same plus ``Reconstructor.solve`` on every frame the server keeps up with
   (``max_lag_ms`` from configs/server.toml skips the solve of frames that are already late).
 
@@ -49,7 +49,7 @@ def run(n_motes: int, fps: float, seconds: float, solve: bool) -> dict:
     server = Server(default_rig(n_motes), reconstructor=make_reconstructor(None) if solve else None,
                     config=ServerConfig(keep_history=False, max_lag_ms=cfg.server.max_lag_ms),
                     sync_config=SyncConfig(**{**cfg.sync.__dict__, "fps": fps}), tri_config=cfg.triangulate,
-                    swap_config=cfg.swap)
+                    label_config=cfg.labelling)
     with LiveServer(server, session="bench", listen=[ep]):
         proc = subprocess.Popen([sys.executable, "-m", "samba_server.simmotes", "--connect", ep, "--motes",
                                  str(n_motes), "--fps", str(fps), "--duration", str(seconds)],
