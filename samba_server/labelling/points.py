@@ -98,7 +98,7 @@ class PointReconstructor:
         cams = rig.cameras
         self.C = len(cams)
         self.f = np.array([0.5 * (c.matrix[0, 0] + c.matrix[1, 1]) for c in cams])
-        self.size = np.array([c.size for c in cams], float)
+        self.centres = np.stack([c.center for c in cams])  # (C, 3) world metres
         self.pairs: list[tuple[int, int, np.ndarray]] = []
         for a in range(self.C):
             for b in range(a + 1, self.C):
@@ -236,6 +236,5 @@ class PointReconstructor:
         fin = np.isfinite(X).all(axis=1)
         Xs = np.where(fin[:, None], X, 0.0)
         ok = fin & (Xs[:, 2] >= cfg.z_min) & (Xs[:, 2] <= cfg.z_max)
-        centres = np.stack([c.center for c in self.rig.cameras])
-        dist = np.linalg.norm(Xs[:, None, :] - centres[None], axis=2).min(axis=1)
+        dist = np.linalg.norm(Xs[:, None, :] - self.centres[None], axis=2).min(axis=1)
         return ok & (dist <= cfg.max_range_m)

@@ -60,7 +60,6 @@ def score_take(markers: np.ndarray, joints: np.ndarray, truth_joints: np.ndarray
     """Score one take. markers: (F, 8, 3) named markers (NaN = not named); joints: (F, 13, 3)
     poses (NaN = none); truth_joints: (F, 13, 3); visible: (F, 8) from :func:`separable_visible`;
     blackout: (F,) bool; n_lead: frames of standard pose and lead-in before the motion."""
-    F = len(markers)
     truth = truth_joints[:, list(MARKER_JOINT)]
     named = np.isfinite(markers).all(axis=2)
     dd = np.linalg.norm(markers[:, :, None, :] - truth[:, None, :, :], axis=-1)  # (F, 8, 8)
