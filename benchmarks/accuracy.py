@@ -6,6 +6,9 @@ skeleton x U(0.85, 1.15), each bone type x U(0.93, 1.07)), one second of the sta
 prepended, 3 mm marker noise, 5 % missing markers. Reports MPJPE normalised to a 45 cm tibia
 over all 13 joints and over the 5 unobserved ones (head, elbows, hips), each bone's length
 sigma over a take and each bone's mean length error, and writes them to docs/BENCHMARKS.md.
+Skin-marker column: the same takes with the markers on landmarks (samba_common.markerset,
+offsets varied per subject, the same noise and missing markers), the subject calibrated from the
+take (samba_server.recon.subject_fit); MPJPE and the recovered offsets against the truth.
 
     python benchmarks/accuracy.py [--data ../shared/data/cmu-bvh] [--clips 3] [--seconds 15]
 """
@@ -28,6 +31,8 @@ from samba_common.skeleton import BONE_TYPES, UNOBSERVED_JOINTS  # noqa: E402
 from samba_server.recon.db import build_db  # noqa: E402
 from samba_server.recon.evaluate import bone_report, mpjpe, observe, vary_body  # noqa: E402
 from samba_server.recon.reconstruct import ReconstructConfig, reconstruct_take  # noqa: E402
+from samba_server.recon.subject_fit import calibrate_subject  # noqa: E402
+from samba_common.markerset import markers_from_joints, vary_offsets  # noqa: E402
 
 
 def _descriptions(index: Path) -> dict[str, str]:
@@ -50,6 +55,8 @@ def main() -> int:
     ap.add_argument("--pseudo", type=int, default=10)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--no-record", action="store_true", help="do not write docs/BENCHMARKS.md")
+    ap.add_argument("--no-skin", action="store_true", help="skip the skin-marker column")
+    ap.add_argument("--calib-iterations", type=int, default=2, help="subject calibration rounds (skin column)")
     args = ap.parse_args()
     files = sorted(Path(args.data).glob("*.bvh"))
     motion = _descriptions(Path(args.data) / "INDEX.csv")
@@ -59,6 +66,7 @@ def main() -> int:
     rng = np.random.default_rng(args.seed)
     cfg = ReconstructConfig(k=args.k, pseudo=args.pseudo)
     rows, all_err, unobs_err, sig, mean_err, ms, walks = [], [], [], [], [], [], []
+    skin_all, skin_unobs, off_leg, off_arm, skin_ms = [], [], [], [], []
     for subject, clips in sorted(by_subject.items()):
         others = [f for f in files if f not in clips]
         db = build_db(others, fps=args.fps)
@@ -70,8 +78,24 @@ def main() -> int:
             truth, _lens = vary_body(joints, rng)
             truth = prepend_standard_pose(truth, args.fps)
             t = np.arange(len(truth)) / args.fps
-            markers = observe(truth, rng)
+            noise = observe(np.zeros_like(truth), rng)  # noise and missing markers, shared by both columns
+            markers = truth[:, [1, 2, 5, 6, 9, 10, 11, 12]] + noise
             est, info = reconstruct_take(markers, t, db, cfg)
+            skin_cols = ""
+            if not args.no_skin:
+                true_off = vary_offsets(np.random.default_rng([args.seed, len(rows)]))  # own stream: the
+                # joint-centre column keeps exactly its earlier draws
+                skin = markers_from_joints(truth, true_off) + noise
+                subject = calibrate_subject(skin, t, db, cfg, iterations=args.calib_iterations).subject
+                est_s, info_s = reconstruct_take(skin, t, db, cfg, lengths=subject.lengths, offsets=subject.offsets)
+                err = np.abs(subject.offsets - true_off)
+                skin_all.append(mpjpe(est_s, truth))
+                skin_unobs.append(mpjpe(est_s, truth, UNOBSERVED_JOINTS))
+                off_leg.append(err[4:].max())
+                off_arm.append(err[:4].max())
+                skin_ms.append(info_s["ms_per_frame"])
+                skin_cols = (f" {100 * skin_all[-1]:.2f} | {100 * skin_unobs[-1]:.2f} | {1000 * off_leg[-1]:.1f} | "
+                             f"{1000 * off_arm[-1]:.1f} |")
             a, u = mpjpe(est, truth), mpjpe(est, truth, UNOBSERVED_JOINTS)
             br = bone_report(est, truth)
             unsolved = int(np.sum(info["status"] == "unsolved"))
@@ -79,7 +103,7 @@ def main() -> int:
             if what.startswith("walk"):
                 walks.append((a, u))
             rows.append(f"| {f.stem} | {what} | {len(t)} | {100 * a:.2f} | {100 * u:.2f} | {1000 * br['sigma'].max():.1f} | "
-                        f"{100 * br['mean_error'].max():.2f} | {unsolved} | {info['ms_per_frame']:.2f} |")
+                        f"{100 * br['mean_error'].max():.2f} | {unsolved} | {info['ms_per_frame']:.2f} |{skin_cols}")
             print(rows[-1], flush=True)
             all_err.append(a)
             unobs_err.append(u)
@@ -96,12 +120,23 @@ def main() -> int:
         + f"; worst bone **{100 * me_a.mean(axis=0).max():.2f} cm** (target <= 1)",
         f"- solve time {np.mean(ms):.2f} ms/frame (K={args.k}, N={args.pseudo}; see speed.py for the one-core figure)",
     ]
+    if skin_all:
+        summary += [
+            f"- skin markers (same takes, landmark offsets varied per subject, subject calibrated from the take): "
+            f"MPJPE all **{100 * np.mean(skin_all):.2f} cm**, unobserved **{100 * np.mean(skin_unobs):.2f} cm**; "
+            f"cost over joint-centre markers **{100 * (np.mean(skin_all) - np.mean(all_err)):+.2f} cm** (target <= 0.3)",
+            f"- recovered offsets vs truth, worst component per take, mean over takes: legs "
+            f"**{1000 * np.mean(off_leg):.1f} mm** (target <= 5), arms **{1000 * np.mean(off_arm):.1f} mm** "
+            f"(target <= 10); skin solve {np.mean(skin_ms):.2f} ms/frame",
+        ]
     if walks:
         w = np.array(walks)
         summary.insert(2, f"- walking clips only ({len(w)}): **{100 * w[:, 0].mean():.2f} cm** all joints, "
                           f"{100 * w[:, 1].mean():.2f} cm unobserved (thesis: 1.7 cm on walking)")
-    table = ["| clip | motion | frames | MPJPE all (cm) | MPJPE unobserved (cm) | worst bone sigma (mm) | worst bone mean error (cm) | unsolved | ms/frame |",
-             "|---|---|---|---|---|---|---|---|---|", *rows]
+    skin_head = " skin MPJPE all (cm) | skin MPJPE unobserved (cm) | offset error legs (mm) | offset error arms (mm) |"
+    table = ["| clip | motion | frames | MPJPE all (cm) | MPJPE unobserved (cm) | worst bone sigma (mm) | worst bone mean error (cm) | unsolved | ms/frame |"
+             + (skin_head if skin_all else ""),
+             "|---|---|---|---|---|---|---|---|---|" + ("---|---|---|---|" if skin_all else ""), *rows]
     print("\n".join(summary))
     if not args.no_record:
         record("Reconstruction accuracy (benchmarks/accuracy.py)",

@@ -11,7 +11,11 @@ capture by the minimum transport latency, about 0.15 ms on loopback). Two config
 
 Also searched: the highest mote frame rate (4 motes) the pipeline sustains without falling
 behind (>= 95 % of frames out, median latency not growing). Appends to docs/BENCHMARKS.md.
-Usage: ``python benchmarks/latency.py [--seconds 5] [--no-write]``.
+
+TLS cost: the same 4 x 60 runs over plain TCP and over mutual TLS with access control
+(``--tls``, keys from ``samba-keys``), interleaved plain/TLS/plain/TLS, side by side in their own
+section ("Server latency: TLS cost"). Target: TLS adds <= 0.5 ms p50.
+Usage: ``python benchmarks/latency.py [--seconds 5] [--no-write] [--tls-only]``.
 """
 
 from __future__ import annotations
@@ -37,22 +41,27 @@ from samba_server.sync import SyncConfig
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _endpoint() -> str:
+def _endpoint(proto: str = "tcp") -> str:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+        return f"{proto}/127.0.0.1:{s.getsockname()[1]}"
 
 
-def run(n_motes: int, fps: float, seconds: float, solve: bool) -> dict:
+def run(n_motes: int, fps: float, seconds: float, solve: bool, tls: str | None = None) -> dict:
+    """One run; ``tls``: keys folder for mutual TLS + access control (None = plain TCP)."""
+    from samba_common import keys
+
     cfg = load_server_configs()
-    ep = _endpoint()
+    ep = _endpoint("tls" if tls else "tcp")
     server = Server(default_rig(n_motes), reconstructor=make_reconstructor(None) if solve else None,
                     config=ServerConfig(keep_history=False, max_lag_ms=cfg.server.max_lag_ms),
                     sync_config=SyncConfig(**{**cfg.sync.__dict__, "fps": fps}), tri_config=cfg.triangulate,
                     label_config=cfg.labelling)
-    with LiveServer(server, session="bench", listen=[ep]):
+    extra = keys.server_settings(tls, "bench") if tls else None
+    with LiveServer(server, session="bench", listen=[ep], extra=extra):
         proc = subprocess.Popen([sys.executable, "-m", "samba_server.simmotes", "--connect", ep, "--motes",
-                                 str(n_motes), "--fps", str(fps), "--duration", str(seconds)],
+                                 str(n_motes), "--fps", str(fps), "--duration", str(seconds)]
+                                + (["--tls", str(tls)] if tls else []),
                                 stdout=subprocess.PIPE, text=True)
         ready = proc.stdout.readline().strip()
         out = proc.communicate(timeout=seconds + 30)[0]
@@ -61,7 +70,7 @@ def run(n_motes: int, fps: float, seconds: float, solve: bool) -> dict:
     lat = lat[len(lat) // 10:]  # drop the start-up (clock filter warm-up, body estimate)
     half = len(lat) // 2
     expected = seconds * fps
-    return {"motes": n_motes, "fps": fps, "solve": solve, "ready": ready == "ready",
+    return {"motes": n_motes, "fps": fps, "solve": solve, "tls": bool(tls), "ready": ready == "ready",
             "sent": out.strip(), "frames": server.stats.frames, "expected": int(expected),
             "solved": server.stats.solved, "skipped": server.stats.solve_skipped,
             "p50": float(np.percentile(lat, 50)) if len(lat) else float("nan"),
@@ -74,7 +83,11 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=5.0)
     ap.add_argument("--no-write", action="store_true")
+    ap.add_argument("--tls-only", action="store_true", help="only the plain vs TLS comparison")
     args = ap.parse_args()
+    tls_cost(args.seconds, not args.no_write)
+    if args.tls_only:
+        return 0
     rows = []
     for solve in (False, True):
         for n in (2, 4):
@@ -111,6 +124,44 @@ def main() -> int:
             old = old[:start] + (old[end + 1:] if end >= 0 else "")
         path.write_text(old.rstrip() + "\n\n" + text)
     return 0
+
+
+def tls_cost(seconds: float, write: bool) -> None:
+    """4 x 60 over plain TCP and mutual TLS, interleaved, with and without the solve."""
+    import tempfile
+
+    from samba_common import keys
+
+    from _record import record
+
+    with tempfile.TemporaryDirectory(prefix="samba-bench-keys-") as tmp:
+        keys.init_keys(tmp, motes=[f"cam{i}" for i in range(4)])
+        runs = []
+        for solve in (False, True):
+            for _rep in range(2):
+                for tls in (None, tmp):
+                    r = run(4, 60.0, seconds, solve, tls)
+                    runs.append(r)
+                    print(r, flush=True)
+    lines = [f"4 motes x 60 fps, motes in a separate process, {seconds:.0f} s per run, runs interleaved "
+             "plain / TLS / plain / TLS. TLS = mutual TLS (ECDSA P-256 certificates from samba-keys) plus the "
+             "server's access control, as `--tls` runs it.", "",
+             "| solve | transport | frames out / expected | p50 ms | p99 ms |", "|---|---|---|---|---|"]
+    summary = {}
+    for r in runs:
+        lines.append(f"| {'yes' if r['solve'] else 'no'} | {'TLS' if r['tls'] else 'TCP'} | {r['frames']} / "
+                     f"{r['expected']} | {r['p50']:.2f} | {r['p99']:.2f} |")
+        summary.setdefault((r["solve"], r["tls"]), []).append((r["p50"], r["p99"]))
+    lines.append("")
+    for solve in (False, True):
+        plain, tls = np.array(summary[(solve, False)]), np.array(summary[(solve, True)])
+        d50, d99 = tls[:, 0].mean() - plain[:, 0].mean(), tls[:, 1].mean() - plain[:, 1].mean()
+        lines.append(f"- {'with' if solve else 'without'} the solve: TLS adds {d50:+.2f} ms p50, {d99:+.2f} ms p99 "
+                     f"(means of the runs; target <= +0.5 ms p50).")
+    text = "\n".join(lines)
+    print(text)
+    if write:
+        record("Server latency: TLS cost (benchmarks/latency.py)", lines)
 
 
 if __name__ == "__main__":

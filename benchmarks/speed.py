@@ -3,7 +3,8 @@
 Times ``Reconstructor.solve`` (alignment, KD-tree search, pseudo-poses, local PCA prior, linear
 start, Levenberg-Marquardt) frame by frame on held-out takes (a database without the take's
 subject), for K=10, N=10 (the thesis' choice: 23.5 ms, 49 iterations) and for K=100, N=0
-(thesis: 88.6 ms, 78 iterations), side by side in one run. Prints median and p95 ms/frame and
+(thesis: 88.6 ms, 78 iterations), and K=10, N=10 on the same takes with skin markers solved
+through the marker model (known offsets), side by side in one run. Prints median and p95 ms/frame and
 mean LM iterations, and records them in docs/BENCHMARKS.md.
 
     python benchmarks/speed.py [--data ../shared/data/cmu-bvh] [--seconds 20]
@@ -33,8 +34,11 @@ from samba_server.recon.db import load_default_db  # noqa: E402
 from samba_server.recon.evaluate import observe, vary_body  # noqa: E402
 from samba_server.recon.proportions import estimate_lengths  # noqa: E402
 from samba_server.recon.reconstruct import ReconstructConfig, Reconstructor  # noqa: E402
+from samba_common.markerset import markers_from_joints, vary_offsets  # noqa: E402
+from samba_common.skeleton import MARKER_JOINT  # noqa: E402
 
 CLIPS = ("002_05", "005_02", "006_10")  # punch, dance, basketball
+SKIN = "K=10, N=10, skin markers + offsets"
 
 
 def time_take(rec: Reconstructor, markers: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -62,7 +66,7 @@ def main() -> int:
     full = load_default_db()
     configs = {"K=10, N=10": replace(ReconstructConfig(), k=10, pseudo=10),
                "K=100, N=0": replace(ReconstructConfig(), k=100, pseudo=0)}
-    results: dict[str, list] = {name: [[], [], []] for name in configs}  # per-round medians, all ms, iterations
+    results: dict[str, list] = {name: [[], [], []] for name in (*configs, SKIN)}  # per-round medians, all ms, iterations
     takes = []
     for clip in CLIPS:
         take = load_bvh(Path(args.data) / f"{clip}.bvh")
@@ -73,12 +77,21 @@ def main() -> int:
         markers = observe(truth, rng)
         db = full.without(lambda n, s=clip.split("_")[0]: n.startswith(s + "_"))
         lengths = estimate_lengths(markers, db.mean_lengths)
-        takes.append((markers, t, {name: Reconstructor(db, cfg, lengths) for name, cfg in configs.items()}))
+        recs = {name: Reconstructor(db, cfg, lengths) for name, cfg in configs.items()}
+        # skin markers (landmark offsets, samba_common.markerset) solved through the marker model; own
+        # random stream so the joint-centre takes keep their draws
+        srng = np.random.default_rng([3, len(takes)])
+        offsets = vary_offsets(srng)
+        skin = markers_from_joints(truth, offsets) + (markers - truth[:, list(MARKER_JOINT)])
+        recs[SKIN] = (Reconstructor(db, configs["K=10, N=10"], estimate_lengths(skin, db.mean_lengths, offsets), offsets), skin)
+        takes.append((markers, t, recs))
     for _round in range(args.rounds):
-        for name in configs:  # configurations side by side in every round
+        for name in (*configs, SKIN):  # configurations side by side in every round
             secs, iters = [], []
             for markers, t, recs in takes:
                 rec = recs[name]
+                if name == SKIN:
+                    rec, markers = rec
                 time_take(rec, markers[:5], t[:5])  # compile / warm up
                 rec.reset()
                 s_, i_ = time_take(rec, markers, t)

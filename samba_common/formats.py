@@ -7,7 +7,9 @@ naming the file and the key, so a user sees *which* file is wrong and *why*.
 from __future__ import annotations
 
 import os
+import struct
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -58,8 +60,9 @@ def _open_npz(path: str | os.PathLike) -> dict[str, np.ndarray]:
     try:
         with np.load(p, allow_pickle=False) as z:
             return {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
-        raise FormatError(p, None, f"not a readable .npz file ({exc})") from None
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError, struct.error,
+            UnicodeDecodeError, MemoryError, NotImplementedError) as exc:  # a damaged zip/npy fails in any layer
+        raise FormatError(p, None, f"not a readable .npz file ({type(exc).__name__}: {exc})") from None
 
 
 def _names(path, data, key, expected: tuple[str, ...]) -> None:

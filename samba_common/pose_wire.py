@@ -53,8 +53,9 @@ FLAG_SOLVED = 0x01  #: joints hold a solution
 FLAG_MARKERS = 0x02  #: the triangulated markers follow the joints
 FLAG_INCOMPLETE = 0x04  #: at least one live mote had no packet in this frame
 FLAG_LABEL_OVERRIDDEN = 0x08  #: the 3D labelling named a blob otherwise than its mote did
+FLAG_SOLVE_SKIPPED = 0x10  #: live: the frame was older than max_lag_ms, so its solve was skipped
 FLAG_NAMES = {FLAG_SOLVED: "solved", FLAG_MARKERS: "markers", FLAG_INCOMPLETE: "incomplete",
-              FLAG_LABEL_OVERRIDDEN: "label_overridden"}
+              FLAG_LABEL_OVERRIDDEN: "label_overridden", FLAG_SOLVE_SKIPPED: "solve_skipped"}
 
 
 class PoseError(ValueError):
@@ -194,5 +195,5 @@ def pose_from_json(buf: bytes | str) -> PoseMessage:
                            int(d.get("marker_mask", 0)),
                            nan if d.get("label_margin_m") is None else float(d["label_margin_m"]),
                            str(d.get("label_mode", "lost")))
-    except (KeyError, TypeError, ValueError) as exc:
+    except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise PoseError(f"pose JSON malformed: {exc}") from None

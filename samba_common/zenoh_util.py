@@ -80,7 +80,12 @@ def make_config(mode: str = "peer", listen: Iterable[str] = (), connect: Iterabl
 
     mode: "peer" or "client"; listen/connect: endpoints such as ``tcp/127.0.0.1:7447``;
     scouting: multicast scouting on/off (off in tests); extra: more ``key: value`` JSON
-    settings (for example ``{"timestamping/enabled": True}``).
+    settings (for example ``{"timestamping/enabled": True}``, or the TLS and access-control
+    settings of :mod:`samba_common.keys`).
+
+    Without ``listen`` endpoints the session listens nowhere (Zenoh's own default is every
+    interface on a random port): a mote or a client that connects out needs no open port.
+    Only with ``scouting`` on is Zenoh's default kept, so that scouted peers can reach it.
     """
     import zenoh
 
@@ -90,7 +95,7 @@ def make_config(mode: str = "peer", listen: Iterable[str] = (), connect: Iterabl
     cfg.insert_json5("mode", json.dumps(mode))
     cfg.insert_json5("scouting/multicast/enabled", json.dumps(bool(scouting)))
     listen, connect = list(listen), list(connect)
-    if listen:
+    if listen or not scouting:
         cfg.insert_json5("listen/endpoints", json.dumps(listen))
     if connect:
         cfg.insert_json5("connect/endpoints", json.dumps(connect))

@@ -2,7 +2,8 @@
 
 Used by the ``samba-mote`` CLI and by tests. The loop never busy-waits (a live source blocks
 in ``read()``, file/sim sources pace themselves or run flat out), survives a source that
-fails (closed and reopened with backoff: camera unplugged and back) and a transport that
+fails (closed and reopened with backoff: camera unplugged and back; a missing file raises
+:class:`~samba_mote.sources.SourceGone` at once instead) and a transport that
 fails (see :class:`samba_mote.transports.Resilient`), and stops at the end of a finite
 source, after ``max_frames``, or when ``stop`` is set (SIGINT/SIGTERM in the CLI).
 """
@@ -22,7 +23,7 @@ import numpy as np
 from samba_common.wire import MoteStatus, encode_packet, encode_status
 
 from .pipeline import MotePipeline
-from .sources import Source, SourceError
+from .sources import Source, SourceError, SourceGone
 
 log = logging.getLogger(__name__)
 
@@ -113,6 +114,9 @@ class MoteRunner:
                         source = self.open_source()
                         period_ns = 1e9 / source.fps if getattr(source, "fps", 0) else None
                         backoff = self.reopen_backoff
+                    except SourceGone:  # a missing file will not appear: no retry
+                        st.source_errors += 1
+                        raise
                     except (SourceError, OSError) as exc:
                         st.source_errors += 1
                         log.warning("source unavailable (%s); retrying in %.1f s", exc, backoff)

@@ -2,7 +2,7 @@
 
 =========================================================  =====================================
 ``v4l2:/dev/video0?width=160&height=120&fps=60&fourcc=GREY&exposure=10&gain=0``  camera (OpenCV V4L2)
-``file:take/cam0.avi?fps=60&realtime=0&loop=0``            video file (any OpenCV codec)
+``file:take/cam0.avi?fps=60&realtime=1&loop=0&start=T``    video file (any OpenCV codec)
 ``images:dir/%04d.png?fps=60``                             numbered image files
 ``sim:?clip=walk.bvh&cam=cam0&cameras=2&seed=0&seconds=10&realtime=1&loop=0``  simulator
 =========================================================  =====================================
@@ -14,7 +14,10 @@ Clocks: V4L2 buffers carry a CLOCK_MONOTONIC timestamp (exposed by OpenCV as
 monotonic_ns()`` measured at open (keep the board's wall clock disciplined by NTP/PTP/chrony).
 When the driver gives no usable stamp, the time of the ``read()`` return is used. Files,
 images and the simulator stamp frame k as ``start + k / fps`` where ``start`` is the wall
-time at open, and with ``realtime=1`` they also pace frames at ``fps``.
+time at open (or ``start=T``, Unix seconds, for a file: frame 0 is stamped T and the source
+waits until then, so several motes playing the files of one take stay in step), and with
+``realtime=1`` they also pace frames at ``fps``. A video file, like the simulator, plays in real
+time by default, as a camera would; ``realtime=0`` reads it as fast as possible (offline tools).
 """
 
 from __future__ import annotations
@@ -32,6 +35,10 @@ log = logging.getLogger(__name__)
 
 class SourceError(OSError):
     """A source cannot be opened or stopped delivering frames (e.g. camera unplugged)."""
+
+
+class SourceGone(SourceError):
+    """A source that will not come back by waiting (a missing or unreadable file): not retried."""
 
 
 class Source(Protocol):
@@ -69,10 +76,12 @@ def _flag(v: str) -> bool:
 class _Paced:
     """Frame k stamped start + k/fps; optional real-time pacing (sleep, no busy wait)."""
 
-    def __init__(self, fps: float, realtime: bool) -> None:
+    def __init__(self, fps: float, realtime: bool, start_s: float | None = None) -> None:
         self.fps, self.realtime = fps, realtime
-        self.start_ns = time.time_ns()
-        self._mono0 = time.monotonic()
+        now_ns = time.time_ns()
+        self.start_ns = now_ns if start_s is None else int(round(start_s * 1e9))
+        # the monotonic instant of frame 0 (in the future when start= is ahead of now)
+        self._mono0 = time.monotonic() + (self.start_ns - now_ns) / 1e9
         self.k = 0
 
     def stamp(self) -> int:
@@ -132,21 +141,28 @@ class V4L2Source:
 
 
 class FileSource:
-    """A video file (FFV1/MJPG/... anything OpenCV reads)."""
+    """A video file (FFV1/MJPG/... anything OpenCV reads). ``fps`` overrides the file's rate
+    (a warning when they disagree); ``realtime`` paces frames like a camera; ``start_s``: Unix
+    time of frame 0. A file that is missing or unreadable raises :class:`SourceGone` (it will
+    not come back, so it is not retried)."""
 
-    def __init__(self, path: str, fps: float | None = None, realtime: bool = False, loop: bool = False) -> None:
+    def __init__(self, path: str, fps: float | None = None, realtime: bool = True, loop: bool = False,
+                 start_s: float | None = None) -> None:
         import cv2
 
-        if not Path(path).exists():
-            raise SourceError(f"video file not found: {path}")
+        if not Path(path).is_file():
+            raise SourceGone(f"{path}: video file not found")
         cap = cv2.VideoCapture(path)
         if not cap.isOpened():
-            raise SourceError(f"cannot open video {path}")
+            raise SourceGone(f"{path}: not a video OpenCV can read")
         cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
         self.path, self._cap, self._cv2, self.loop = path, cap, cv2, loop
         self.size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
-        self.fps = float(fps or cap.get(cv2.CAP_PROP_FPS) or 60.0)
-        self._pace = _Paced(self.fps, realtime)
+        file_fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        if fps and file_fps > 0 and abs(fps - file_fps) > 0.01 * file_fps:
+            log.warning("%s: fps=%g given, but the file says %g fps; stamping frames at %g fps", path, fps, file_fps, fps)
+        self.fps = float(fps or file_fps or 60.0)
+        self._pace = _Paced(self.fps, realtime, start_s)
 
     def read(self) -> tuple[int, np.ndarray] | None:
         ok, frame = self._cap.read()
@@ -169,7 +185,7 @@ class ImageFolderSource(FileSource):
 
         cap = cv2.VideoCapture(pattern, cv2.CAP_IMAGES)
         if not cap.isOpened():
-            raise SourceError(f"no images match {pattern}")
+            raise SourceGone(f"no images match {pattern}")
         self.path, self._cap, self._cv2, self.loop = pattern, cap, cv2, loop
         self.size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
         self.fps = fps
@@ -234,7 +250,8 @@ def open_source(url: str) -> Source:
     if scheme == "file":
         if not path_part:
             raise ValueError("file: source needs a path, e.g. file:take/cam0.avi")
-        return FileSource(path_part, _q(q, "fps", None, float), _q(q, "realtime", False, _flag), _q(q, "loop", False, _flag))
+        return FileSource(path_part, _q(q, "fps", None, float), _q(q, "realtime", True, _flag), _q(q, "loop", False, _flag),
+                          _q(q, "start", None, float))
     if scheme == "images":
         if not path_part:
             raise ValueError("images: source needs a pattern, e.g. images:dir/%04d.png")
@@ -247,4 +264,4 @@ def open_source(url: str) -> Source:
     raise ValueError(f"unknown source {url!r}; use v4l2:, file:, images: or sim:")
 
 
-__all__ = ["Source", "SourceError", "open_source", "V4L2Source", "FileSource", "ImageFolderSource", "SimSource"]
+__all__ = ["Source", "SourceError", "SourceGone", "open_source", "V4L2Source", "FileSource", "ImageFolderSource", "SimSource"]

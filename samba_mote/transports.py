@@ -53,12 +53,27 @@ class ZenohTransport(_Ctx):
     liveliness token ``samba/{session}/mote/{id}`` while open."""
 
     def __init__(self, mote_id: str, session_name: str = zk.DEFAULT_SESSION, mode: str = "peer",
-                 listen: tuple[str, ...] = (), connect: tuple[str, ...] = (), scouting: bool = False) -> None:
+                 listen: tuple[str, ...] = (), connect: tuple[str, ...] = (), scouting: bool = False,
+                 tls: str | None = None) -> None:
+        """tls: keys folder (``samba-keys``) for mutual TLS as this mote; endpoints must be ``tls/...``.
+        Without endpoints or scouting it connects to a server on this machine (``tcp/127.0.0.1:7447``,
+        ``tls/...`` with tls), the server's default."""
         import zenoh
 
         self.mote_id, self.session_name = mote_id, session_name
+        if not listen and not connect and not scouting:
+            connect = (("tls" if tls else "tcp") + "/127.0.0.1:7447",)
+        extra = None
+        if tls:
+            from samba_common import keys
+
+            keys.check_endpoints(list(listen) + list(connect), "endpoint")
+            try:
+                extra = keys.mote_settings(tls, mote_id)
+            except keys.KeysError as exc:
+                raise TransportError(str(exc)) from None
         try:
-            self.session = zenoh.open(zk.make_config(mode, listen, connect, scouting))
+            self.session = zenoh.open(zk.make_config(mode, listen, connect, scouting, extra=extra))
         except Exception as exc:  # zenoh.ZError and friends
             raise TransportError(f"cannot open zenoh session ({exc})") from None
         self._markers = self.session.declare_publisher(zk.markers_key(session_name, mote_id))

@@ -84,8 +84,10 @@ def setup_logging(verbose: int) -> None:
         pass
 
 
-def make_reconstructor(db_path: str | None, config: ReconstructConfig | None = None):
-    """A Reconstructor with the motion DB at ``db_path`` (or the shipped one), compiled and ready."""
+def make_reconstructor(db_path: str | None, config: ReconstructConfig | None = None, subject=None):
+    """A Reconstructor with the motion DB at ``db_path`` (or the shipped one), compiled and ready.
+    subject: a samba_common.subject.Subject (bone lengths + marker offsets) or None (body measured
+    live from the standard pose, markers on the joint centres)."""
     from .recon.reconstruct import Reconstructor
 
     db = None
@@ -93,21 +95,34 @@ def make_reconstructor(db_path: str | None, config: ReconstructConfig | None = N
         from .recon.db import MotionDB
 
         db = MotionDB.load(db_path)
-    rec = Reconstructor(db=db, config=config)
+    if subject is not None:
+        offsets = subject.offsets if subject.placement == "skin" else None
+        rec = Reconstructor(db=db, config=config, lengths=subject.lengths, offsets=offsets)
+    else:
+        rec = Reconstructor(db=db, config=config)
     rec.warm_up()  # compile before the first live frame
     return rec
 
 
 def build_server(calibration: str | os.PathLike, configs: ServerConfigs, db: str | None = None,
-                 record: str | None = None, live: bool = True) -> Server:
-    """Load the calibration and build a Server (raises CalibrationError / RecorderError)."""
+                 record: str | None = None, live: bool = True, subject: str | None = None) -> Server:
+    """Load the calibration and build a Server (raises CalibrationError / RecorderError, and
+    SubjectError for a bad ``subject`` toml)."""
     toml = Path(calibration).read_bytes()
     rig = CameraRig.load(calibration)
     server_cfg = configs.server
     if not live and server_cfg.max_lag_ms:
         server_cfg = ServerConfig(**{**server_cfg.__dict__, "max_lag_ms": 0.0})
-    recorder = Recorder(record, metadata={"tool": "samba-server"}) if record else None
-    return Server(rig, calibration_toml=toml, reconstructor=make_reconstructor(db, configs.reconstruct), config=server_cfg,
+    subj = None
+    meta = {"tool": "samba-server"}
+    if subject:
+        from samba_common.subject import load_subject
+
+        subj = load_subject(subject)
+        meta["subject_toml"] = subj.to_toml()
+    recorder = Recorder(record, metadata=meta) if record else None
+    return Server(rig, calibration_toml=toml, reconstructor=make_reconstructor(db, configs.reconstruct, subj),
+                  config=server_cfg,
                   sync_config=configs.sync, tri_config=configs.triangulate, label_config=configs.labelling,
                   recorder=recorder)
 
@@ -132,6 +147,26 @@ class Status:
         self.server = server
         self.alive = alive
         self._last = (time.monotonic(), 0)
+        self._last_packets: dict[str, int] = {}
+        self._blobs: dict[str, int] = {}  # blobs in each mote's latest packet
+        server.packet_listeners.append(self._on_packet)
+
+    def _on_packet(self, pkt) -> None:
+        self._blobs[pkt.mote_id] = int(len(pkt.uv))
+
+    def _mote_rows(self, alive: list[str], dt: float) -> dict:
+        """Per mote: alive, fps (packets/s since the last snapshot), blobs (latest packet),
+        drops (packets dropped late or duplicate + frames missed while alive), packets, late."""
+        s = self.server
+        rows = {}
+        for m in sorted(set(s.rig.names) | set(alive)):
+            n = s.stats.mote_packets.get(m, 0)
+            st = s.sync.motes.get(m)
+            rows[m] = {"alive": m in alive, "packets": n, "late": st.late if st else 0,
+                       "fps": round((n - self._last_packets.get(m, n)) / dt, 1) if m in self._last_packets else None,
+                       "blobs": self._blobs.get(m), "drops": (st.late + st.duplicate + st.missing) if st else 0}
+            self._last_packets[m] = n
+        return rows
 
     def snapshot(self) -> dict:
         s = self.server
@@ -141,15 +176,17 @@ class Status:
         fps = (frames - f0) / max(now - t0, 1e-6)
         self._last = (now, frames)
         lat = s.stats.latency_ms[-120:]
-        late = sum(m.late for m in s.sync.motes.values())
+        late = sum(m.late + m.duplicate for m in s.sync.motes.values())
         alive = sorted(self.alive) if self.alive is not None else s.sync.alive()
         return {"fps": round(fps, 1), "latency_ms": round(float(np.median(lat)), 2) if lat else None,
-                "motes_alive": len(alive), "motes": {m: {"alive": m in alive, "packets": s.stats.mote_packets.get(m, 0),
-                                                          "late": s.sync.motes[m].late if m in s.sync.motes else 0}
-                                                      for m in sorted(set(s.rig.names) | set(alive))},
+                "motes_alive": len(alive), "motes": self._mote_rows(alive, max(now - t0, 1e-6)),
                 "frames": frames, "solved": s.stats.solved,
                 "drops": s.stats.bad_packets + s.stats.unknown_motes + s.stats.queue_overflow + late,
-                "recording": s.recorder is not None}
+                "recording": s.recorder is not None, "degraded": s.sync.frames_incomplete,
+                "drops_by_cause": s.report()["drops"],  # also refreshes the drift estimates
+                "clocks": {m: {"offset_ms": round(st.clock_offset_ms, 2),
+                               "drift_ppm": None if st.drift_ppm != st.drift_ppm else round(st.drift_ppm)}
+                           for m, st in sorted(s.sync.motes.items())}}
 
     @staticmethod
     def line(snap: dict) -> str:
@@ -188,9 +225,10 @@ def attach_viewer(server: Server, http: str, status: Status, record_dir: str | o
     host, _, port = http.rpartition(":")
     viewer = Viewer(host or "127.0.0.1", int(port), on_record=record_toggle(server, record_dir))
 
+    from .viewer.bridge import pose_quality
+
     def on_pose(msg) -> None:
-        viewer.publish_pose(msg.t_ns / 1e9, msg.joints, msg.markers,
-                            {"residual_m": msg.residual_m, "n_markers": msg.n_markers, "latency_ms": msg.latency_ms})
+        viewer.publish_pose(msg.t_ns / 1e9, msg.joints, msg.markers, pose_quality(msg))
 
     def on_packet(pkt) -> None:
         viewer.publish_blobs(pkt.mote_id, pkt.uv, pkt.labels, (pkt.width, pkt.height))
@@ -208,6 +246,29 @@ def add_network_args(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                     help="Zenoh endpoint to connect to (repeatable)")
     ap.add_argument("--scouting", action="store_true", help="enable Zenoh multicast scouting")
+    ap.add_argument("--tls", metavar="KEYS_DIR",
+                    help="mutual TLS + access control with the keys of 'samba-keys init KEYS_DIR' "
+                         "(endpoints then tls/HOST:PORT; see docs/security.md)")
+
+
+def zenoh_endpoints(args) -> tuple[list[str], list[str], dict | None]:
+    """(listen, connect, extra Zenoh settings) of the server from its parsed arguments.
+
+    Without any endpoint or scouting the server listens on loopback port 7447 (``tcp/`` or, with
+    ``--tls``, ``tls/``): a LAN address is only used when the user gives one. With ``--tls`` every
+    endpoint must be ``tls/...`` and the settings are :func:`samba_common.keys.server_settings`.
+    Raises ValueError (bad endpoint) or :class:`samba_common.keys.KeysError` (keys folder).
+    """
+    tls = getattr(args, "tls", None)
+    listen, connect = list(args.listen), list(args.connect)
+    if not listen and not connect and not getattr(args, "scouting", False):
+        listen = [("tls" if tls else "tcp") + "/127.0.0.1:7447"]
+    if not tls:
+        return listen, connect, None
+    from samba_common import keys
+
+    keys.check_endpoints(listen + connect, "endpoint")
+    return listen, connect, keys.server_settings(tls, args.session)
 
 
 def run_live(server: Server, args, extra_stop: threading.Event | None = None, on_tick=None,
@@ -217,13 +278,25 @@ def run_live(server: Server, args, extra_stop: threading.Event | None = None, on
 
     stop = extra_stop or threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    live = LiveServer(server, session=args.session, listen=args.listen, connect=args.connect,
-                      scouting=args.scouting)
+    from samba_common.keys import KeysError
+
+    try:
+        listen, connect, extra = zenoh_endpoints(args)
+    except (KeysError, ValueError) as exc:
+        print(f"{Path(sys.argv[0]).name}: {exc}", file=sys.stderr)
+        if server.recorder is not None:
+            server.recorder.close()
+        return 1
+    live = LiveServer(server, session=args.session, listen=listen, connect=connect,
+                      scouting=args.scouting, extra=extra)
     status = Status(server, live.alive)
     viewer = None
     code = 0
     try:
         live.start()
+        if listen and not getattr(args, "quiet", False):
+            print(f"zenoh: session {args.session!r}, listening on {', '.join(listen)}"
+                  + (" (mutual TLS)" if extra else ""), file=sys.stderr)
         if args.http:
             record_dir = Path(args.record).parent if getattr(args, "record", None) else Path(".")
             viewer = attach_viewer(server, args.http, status, record_dir)

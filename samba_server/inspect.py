@@ -56,10 +56,12 @@ def summarize(path: str | Path) -> TakeSummary:
     s = TakeSummary(Path(path))
     reader = TakeReader(path)
     for m in reader:
-        if m.log_time:
+        mote = m.mote_id
+        if m.log_time and (mote is not None or m.topic == POSE_TOPIC):
+            # the take's span: packets and poses (the calibration and events may be stamped
+            # when the server started, long before or on another clock than the capture)
             s.first_ns = m.log_time if not s.first_ns else min(s.first_ns, m.log_time)
             s.last_ns = max(s.last_ns, m.log_time)
-        mote = m.mote_id
         if mote is not None:
             ms = s.motes.setdefault(mote, MoteSummary(first_ns=m.log_time))
             ms.packets += 1
@@ -93,6 +95,10 @@ def report(s: TakeSummary) -> str:
                      f"(seq gaps), {ms.bad} undecodable")
     solved = sum(p.solved for p in s.poses)
     lat = [p.latency_ms for p in s.poses if np.isfinite(p.latency_ms)]
+    if lat and max(abs(np.percentile(lat, 1)), abs(np.percentile(lat, 99))) > 3.6e6:
+        # over an hour: capture and arrival stamps on different clocks (e.g. an old samba-process take)
+        lines.append("latency: not meaningful, capture and arrival times are on different clocks")
+        lat = []
     rate = (len(s.poses) - 1) / ((s.poses[-1].t_ns - s.poses[0].t_ns) / 1e9) if len(s.poses) > 1 and \
         s.poses[-1].t_ns > s.poses[0].t_ns else 0.0
     lines.append(f"poses: {len(s.poses)} frames ({rate:.1f}/s), {solved} solved, {s.bad_poses} undecodable"

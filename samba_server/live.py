@@ -1,6 +1,7 @@
 """Zenoh wiring of the :class:`~samba_server.server.Server`: subscribe, discover, publish, serve.
 
-- subscriber ``samba/{session}/mote/*/markers`` -> :meth:`Server.ingest` (arrival stamped there)
+- subscriber ``samba/{session}/mote/*/markers`` -> :meth:`Server.ingest` (arrival stamped there;
+  packets republished by ``samba-replay`` carry their recorded arrival, see :class:`ReplayClock`)
 - liveliness subscriber ``samba/{session}/mote/*`` (history on) -> joins/leaves, logged
 - queryable ``samba/{session}/calibration`` -> the calibration.toml bytes
 - publishers ``samba/{session}/pose`` (binary) and ``samba/{session}/pose/json``
@@ -15,6 +16,7 @@ import threading
 from samba_common import zenoh_util as zk
 from samba_common.pose_wire import PoseMessage, encode_pose, pose_to_json
 
+from .replay import ReplayClock
 from .server import Server
 
 log = logging.getLogger(__name__)
@@ -24,12 +26,15 @@ class LiveServer:
     """Run ``server`` on a Zenoh session. Use as a context manager or call start()/close()."""
 
     def __init__(self, server: Server, session: str = zk.DEFAULT_SESSION, listen=(), connect=(),
-                 mode: str = "peer", scouting: bool = False, publish_json: bool = True):
+                 mode: str = "peer", scouting: bool = False, publish_json: bool = True, extra: dict | None = None):
+        """extra: more Zenoh settings, e.g. :func:`samba_common.keys.server_settings` (TLS + access control)."""
         self.server = server
         self.session_name = session
-        self.cfg = zk.make_config(mode=mode, listen=listen, connect=connect, scouting=scouting)
+        self.cfg = zk.make_config(mode=mode, listen=listen, connect=connect, scouting=scouting, extra=extra)
         self.publish_json = publish_json
         self.alive: set[str] = set()
+        self._replay_clock = ReplayClock()
+        self._replaying = False
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._z = None
@@ -40,8 +45,9 @@ class LiveServer:
 
         self._z = zenoh.open(self.cfg)
         z, s = self._z, self.session_name
-        self._pub = z.declare_publisher(zk.pose_key(s))
-        self._pub_json = z.declare_publisher(zk.pose_json_key(s)) if self.publish_json else None
+        self._pub = z.declare_publisher(zk.pose_key(s), encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM)
+        self._pub_json = (z.declare_publisher(zk.pose_json_key(s), encoding=zenoh.Encoding.APPLICATION_JSON)
+                          if self.publish_json else None)
         self.server.publish = self._publish
         self._decls = [
             z.declare_subscriber(zk.markers_key(s, "*"), self._on_markers),
@@ -57,7 +63,17 @@ class LiveServer:
     def _on_markers(self, sample) -> None:
         try:
             mote = zk.mote_id_from_key(str(sample.key_expr)) or "?"
-            self.server.ingest(mote, sample.payload.to_bytes())
+            att = sample.attachment
+            arrival = None
+            if att is not None:  # a packet republished by samba-replay: its recorded timing
+                arrival = self._replay_clock.arrival_ns(att.to_bytes(), self.server.clock(),
+                                                        self.server.last_arrival_ns)
+            # a replay (possibly faster than real time) is solved whole: max_lag_ms is for live motes
+            replaying = arrival is not None
+            if replaying != self._replaying:
+                self._replaying = replaying
+                self.server.skip_seqs = set() if replaying else None
+            self.server.ingest(mote, sample.payload.to_bytes(), arrival_ns=arrival)
         except Exception:  # pragma: no cover - defensive: a callback must not die
             log.exception("ingest failed")
 

@@ -3,13 +3,18 @@
 the same :class:`~samba_server.server.Server` as live, frame by frame.
 
 Camera names come from the video file names (``cam0.avi`` -> ``cam0``) and must be in the
-calibration. Frame ``i`` of every video is stamped ``i / fps`` seconds. The output has one
-row per video frame (FORMATS.md): ``t = i / fps``; frames that could not be solved are NaN.
+calibration. Frame ``i`` of every video is stamped ``start + i / fps``, ``start`` being the
+wall time when processing begins, and the server runs on that same take clock (its ``clock``
+returns the current frame's time): a recording (``--record``) then has capture times,
+arrival times and poses on one clock, like a live take, and latencies of 0 (offline). The
+output has one row per video frame (FORMATS.md): ``t = i / fps``; frames that could not be
+solved are NaN.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -58,10 +63,11 @@ def _video_frames(cap) -> Iterator[np.ndarray]:
 
 
 def process_frames(server: Server, names: list[str], frames: list[Iterable[np.ndarray]], fps: float,
-                   mote_config=None, progress: Progress | None = None, n_frames: int = 0
-                   ) -> tuple[np.ndarray, np.ndarray, dict]:
+                   mote_config=None, progress: Progress | None = None, n_frames: int = 0,
+                   activity=None) -> tuple[np.ndarray, np.ndarray, dict]:
     """Run each camera's frames ((H, W) uint8, in capture order) through its MotePipeline and
-    ``server``; frame i of every camera is stamped i / fps seconds.
+    ``server``; frame i of every camera is stamped start + i / fps (see the module docstring).
+    ``activity``: optional callable(MarkerPacket) seeing every packet (e.g. a MoteActivity).
 
     Returns joints (F, 13, 3), t (F,) seconds (F = the longest camera, at least ``n_frames``),
     and extras: markers (F, 8, 3), residual (F,), n_markers (F,), label_margin (F,) metres.
@@ -74,14 +80,18 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
         raise CalibrationError(None, None, f"videos {missing} have no camera of that name in the calibration "
                                f"(cameras: {server.rig.names})")
     pipes = [MotePipeline(mote_config, n, server.rig) for n in names]
+    base = time.time_ns()
+    now = [base]
+    server.clock = lambda: now[0]  # the take's clock: the time of the frame being processed
     for n in names:
-        server.mote_event(n, True, 0)
+        server.mote_event(n, True, base)
     period = 1e9 / fps
     its = [iter(f) for f in frames]
     open_ = [True] * len(its)
     i = 0
     while any(open_):
-        t_ns = int(round(i * period))
+        t_ns = base + int(round(i * period))
+        now[0] = t_ns
         for c, it in enumerate(its):
             if not open_[c]:
                 continue
@@ -91,6 +101,8 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
                 server.mote_event(names[c], False, t_ns)
                 continue
             pkt = pipes[c].process(t_ns, frame)
+            if activity is not None:
+                activity(pkt)
             server.ingest(names[c], encode_packet(pkt), arrival_ns=t_ns)
         server.process_pending()
         if any(open_):
@@ -105,7 +117,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     margin = np.full(n_frames, np.nan)
     n_markers = np.zeros(n_frames, int)
     for p in server.poses:
-        k = int(round(p.t_ns / period))
+        k = int(round((p.t_ns - base) / period))
         if 0 <= k < n_frames:
             joints[k], markers[k], residual[k], n_markers[k] = p.joints, p.markers, p.residual_m, p.n_markers
             margin[k] = p.label_margin_m
@@ -114,7 +126,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
 
 
 def process_videos(server: Server, videos: list[Path], fps: float, mote_config=None,
-                   progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+                   progress: Progress | None = None, activity=None) -> tuple[np.ndarray, np.ndarray, dict]:
     """:func:`process_frames` on one video per camera (camera name = file stem)."""
     import cv2
 
@@ -122,7 +134,7 @@ def process_videos(server: Server, videos: list[Path], fps: float, mote_config=N
     try:
         counts = [int(c.get(cv2.CAP_PROP_FRAME_COUNT)) for c in caps]
         return process_frames(server, [v.stem for v in videos], [_video_frames(c) for c in caps], fps,
-                              mote_config, progress, max(counts, default=0))
+                              mote_config, progress, max(counts, default=0), activity)
     finally:
         for cap in caps:
             cap.release()

@@ -26,7 +26,13 @@ than about 0.6 s before it died; only the summary is missing, and :func:`iter_me
 such a file by a linear scan up to its last complete chunk. A failing write (full disk, I/O
 error) is rolled back to the last complete chunk and logged; the unwritten bytes are kept in
 memory (up to ``max_pending_bytes``) and written as soon as the disk accepts them, messages
-arriving while that backlog is full are dropped and counted in ``stats.dropped``.
+arriving while that backlog is full are dropped and counted in ``stats.dropped``. When the
+disk takes writes again after such a gap, the backlog completes the current file (with its
+summary) and the recording goes on in a new file ``take-2.mcap``, ``take-3.mcap``... (listed
+in ``stats.files``), so that every file is a gap-free take. A disk that refuses writes for
+longer than ``hold_s`` (5 s) ends the file there (readable, without its summary; the held
+messages are counted as dropped), and the recording resumes in a new file as soon as the disk
+takes one (tried every flush interval), e.g. after the user freed space.
 """
 
 from __future__ import annotations
@@ -63,6 +69,10 @@ FLUSH_INTERVAL_S = 0.5
 CHUNK_BYTES = 1 << 20
 #: unwritten bytes kept while the disk refuses writes; beyond, new messages are dropped
 MAX_PENDING_BYTES = 64 << 20
+#: a disk refusing writes longer than this (seconds) ends the file; a new one starts when it can
+HOLD_S = 5.0
+#: a continuation file is started only with at least this much free space
+MIN_FREE_BYTES = 64 << 10
 
 
 def markers_topic(mote_id: str) -> str:
@@ -210,6 +220,7 @@ class RecorderStats:
     bytes: int = 0
     pending: int = 0
     last_error: str = ""
+    files: list = field(default_factory=list)  #: every file written, the current one last
 
 
 class Recorder:
@@ -222,41 +233,126 @@ class Recorder:
 
     def __init__(self, path: str | os.PathLike, calibration_toml: bytes | None = None,
                  metadata: dict[str, str] | None = None, _sink: _SafeSink | None = None,
-                 flush_interval_s: float = FLUSH_INTERVAL_S, max_pending_bytes: int = MAX_PENDING_BYTES):
+                 flush_interval_s: float = FLUSH_INTERVAL_S, max_pending_bytes: int = MAX_PENDING_BYTES,
+                 hold_s: float = HOLD_S):
         self.path = Path(path)
-        self.stats = RecorderStats()
+        self.hold_s = float(hold_s)
+        self._error_since: float | None = None  # monotonic time the disk started refusing writes
+        self._gap = False  # the file was ended by a long write failure; waiting to start the next
+        self._last_try = 0.0
+        self.first_path = self.path
+        self.stats = RecorderStats(files=[self.path])
+        self._calibration: tuple[bytes, int] | None = None
+        self._metadata = metadata
+        self._dropped_at_error = 0
         self.flush_interval_s = float(flush_interval_s)
         self.max_pending_bytes = int(max_pending_bytes)
         self._lock = threading.Lock()
         self._channels: dict[str, int] = {}
         self._schemas: dict[str, int] = {}
         self._closed = False
+        self._bytes_before = 0  # bytes of the files finished before the current one
         self._open = 0  # messages in the open chunk
         self._spooled = 0  # messages in closed chunks not yet on disk
         self._last_flush = time.monotonic()
-        try:
-            fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        except OSError as exc:
-            raise RecorderError(exc.errno, f"cannot create take file {self.path}: {exc.strerror}") from None
-        self._fd = fd
-        self._sink = _sink or _SafeSink(fd)
-        self._spool = _Spool(self._sink)
-        self._writer = Writer(self._spool, chunk_size=CHUNK_BYTES,  # type: ignore[arg-type]
-                              compression=CompressionType.NONE, use_chunking=True, enable_crcs=True)
-        try:
-            self._writer.start(profile=PROFILE, library="samba")
-            if metadata:
-                self._writer.add_metadata("samba", {str(k): str(v) for k, v in metadata.items()})
-            self._spool.commit()
-        except OSError as exc:
-            os.close(fd)
-            raise RecorderError(exc.errno, f"cannot write take file {self.path}: {exc.strerror}") from None
+        self._start_file(self.path, _sink)
         self._stop = threading.Event()
         self._flusher = threading.Thread(target=self._flush_loop, name=f"recorder-flush {self.path.name}",
                                          daemon=True)
         self._flusher.start()
         if calibration_toml is not None:
             self.write_calibration(calibration_toml)
+
+    def _start_file(self, path: Path, sink: _SafeSink | None = None) -> None:
+        """Create ``path`` and write the MCAP header (raises RecorderError)."""
+        try:
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        except OSError as exc:
+            raise RecorderError(exc.errno, f"cannot create take file {path}: {exc.strerror}") from None
+        self._fd = fd
+        self._sink = sink or _SafeSink(fd)
+        self._spool = _Spool(self._sink)
+        self._channels = {}
+        self._schemas = {}
+        self._writer = Writer(self._spool, chunk_size=CHUNK_BYTES,  # type: ignore[arg-type]
+                              compression=CompressionType.NONE, use_chunking=True, enable_crcs=True)
+        try:
+            self._writer.start(profile=PROFILE, library="samba")
+            if self._metadata:
+                self._writer.add_metadata("samba", {str(k): str(v) for k, v in self._metadata.items()})
+            self._spool.commit()
+        except OSError as exc:
+            os.close(fd)
+            raise RecorderError(exc.errno, f"cannot write take file {path}: {exc.strerror}") from None
+
+    def _rollover(self) -> None:
+        """(lock held, backlog written) Finish the current file and go on in the next one."""
+        old = self.path
+        try:
+            self._writer.finish()
+            self._spool.commit()
+        except OSError as exc:
+            log.error("could not finish %s (%s): readable without its summary", old, exc.strerror or exc)
+        os.close(self._fd)
+        lost = self.stats.dropped - self._dropped_at_error
+        if not self._open_next():
+            self._gap = True  # no room for the next file yet: tried again every flush interval
+            return
+        log.warning("recording continues in %s (%d message(s) could not be written to %s)", self.path, lost, old)
+
+    def _end_file(self) -> None:
+        """(lock held) The disk has refused writes for ``hold_s``: end the file where it is
+        (every complete chunk is on disk), drop the held messages, wait for room for the next."""
+        lost = self._spooled + self._open
+        self.stats.dropped += lost
+        self.stats.written -= lost
+        self._spool.buf.clear()
+        self._spooled = self._open = self.stats.pending = 0
+        os.close(self._fd)
+        self._gap = True
+        self._last_try = time.monotonic()
+        log.warning("recording to %s ended after %.0f s of write failures (%s; %d held message(s) dropped; the "
+                    "file is readable without its summary); a new file starts as soon as the disk takes one",
+                    self.path, self.hold_s, self.stats.last_error, lost)
+
+    def _try_resume(self) -> None:
+        """(lock held, after _end_file) Start the next file if the disk takes it now."""
+        self._last_try = time.monotonic()
+        if self._open_next():
+            self._gap = False
+            self._error_since = None
+            self.stats.last_error = ""
+            log.warning("recording continues in %s (%d message(s) could not be recorded meanwhile)", self.path,
+                        self.stats.dropped - self._dropped_at_error)
+
+    def _open_next(self) -> bool:
+        """(lock held) Create the next continuation file with the calibration; False if impossible."""
+        part = len(self.stats.files) + 1
+        new = self.first_path.with_name(f"{self.first_path.stem}-{part}{self.first_path.suffix}")
+        try:
+            st = os.statvfs(new.parent)
+            if st.f_bavail * st.f_frsize < MIN_FREE_BYTES:  # not worth a file that fills at once
+                return False
+        except OSError:
+            pass
+        try:
+            self._start_file(new)
+        except RecorderError as exc:
+            log.debug("next take file not possible yet: %s", exc)
+            try:
+                new.unlink()
+            except OSError:
+                pass
+            return False
+        self.path = new
+        self.stats.files.append(new)
+        self._bytes_before = self.stats.bytes
+        if self._calibration is not None:
+            toml_bytes, t_ns = self._calibration
+            ch = self._channel(CALIBRATION_TOPIC, "toml", {})
+            self._writer.add_message(channel_id=ch, log_time=t_ns, data=toml_bytes, publish_time=t_ns, sequence=0)
+            self._open += 1
+        return True
 
     # ------------------------------------------------------------------ writing
     def _channel(self, topic: str, encoding: str, metadata: dict[str, str]) -> int:
@@ -285,18 +381,28 @@ class Recorder:
             self._spool.commit()
         except OSError as exc:
             msg = "disk full" if exc.errno == errno.ENOSPC else f"{exc.strerror or exc}"
+            if not self.stats.last_error:
+                self._dropped_at_error = self.stats.dropped
+            now = time.monotonic()
+            if self._error_since is None:
+                self._error_since = now
             if msg != self.stats.last_error:
                 log.error("recording to %s failed (%s): %d message(s) held in memory, retrying every %.1f s",
                           self.path, msg, self._spooled, self.flush_interval_s)
             self.stats.last_error = msg
             self.stats.pending = self._spooled
+            if now - self._error_since >= self.hold_s and not self._closed:
+                self._end_file()
             return False
+        self._error_since = None
         self._spooled = self.stats.pending = 0
-        self.stats.bytes = self._sink.tell()
+        self.stats.bytes = self._bytes_before + self._sink.tell()
         if self.stats.last_error:
-            log.warning("recording to %s resumed (%d message(s) dropped meanwhile)", self.path,
-                        self.stats.dropped)
             self.stats.last_error = ""
+            if self.stats.dropped > self._dropped_at_error and not self._closed:
+                self._rollover()  # a gap: the next messages go to a new file
+            else:
+                log.warning("recording to %s resumed (nothing lost)", self.path)
         return True
 
     def _add(self, topic: str, encoding: str, metadata: dict[str, str], data: bytes, log_time: int,
@@ -305,6 +411,12 @@ class Recorder:
             if self._closed:
                 self.stats.dropped += 1
                 return False
+            if self._gap:
+                if time.monotonic() - self._last_try >= self.flush_interval_s:
+                    self._try_resume()
+                if self._gap:
+                    self.stats.dropped += 1
+                    return False
             if len(self._spool.buf) > self.max_pending_bytes:  # the disk refuses writes, backlog full
                 if time.monotonic() - self._last_flush >= self.flush_interval_s:
                     self._write_out()  # retry (at most once per interval)
@@ -328,14 +440,18 @@ class Recorder:
             with self._lock:
                 if self._closed:
                     return
+                if self._gap:
+                    if time.monotonic() - self._last_try >= self.flush_interval_s:
+                        self._try_resume()
+                    continue
                 if (self._open or self._spool.buf) and time.monotonic() - self._last_flush >= self.flush_interval_s:
                     self._write_out()
 
     def flush(self) -> bool:
         """Write the open chunk now; False if the disk refused (the data stays pending)."""
         with self._lock:
-            if self._closed:
-                return True
+            if self._closed or self._gap:
+                return not self._gap
             return self._write_out()
 
     def write_packet(self, mote_id: str, payload: bytes, arrival_ns: int, capture_ns: int = 0,
@@ -345,7 +461,8 @@ class Recorder:
                          arrival_ns, capture_ns or arrival_ns, seq)
 
     def write_calibration(self, toml_bytes: bytes, t_ns: int = 0) -> bool:
-        """Record the calibration.toml in use."""
+        """Record the calibration.toml in use (again at the start of every continuation file)."""
+        self._calibration = (bytes(toml_bytes), int(t_ns))
         return self._add(CALIBRATION_TOPIC, "toml", {}, toml_bytes, t_ns, t_ns, 0)
 
     def write_pose(self, payload: bytes, publish_ns: int, frame_ns: int, seq: int = 0) -> bool:
@@ -363,27 +480,33 @@ class Recorder:
                 return
             self._closed = True
             self._stop.set()
-            data_ok = self._write_out()  # the last chunk first: it matters more than the summary
-            try:
-                self._writer.finish()
-                self._spool.commit()
-            except OSError as exc:
-                lost = self._spooled
-                self.stats.dropped += lost
-                self.stats.written -= lost
-                self.stats.last_error = exc.strerror or str(exc)
-                log.error("could not finish %s (%s): %s; the file stays readable without its summary",
-                          self.path, exc.strerror or exc,
-                          "summary not written" if data_ok else f"{lost} message(s) lost")
-            finally:
-                self._spooled = self.stats.pending = 0
-                self.stats.bytes = self._sink.tell()
-                os.close(self._fd)
+            if not self._gap:  # (in a gap the last file was already ended by the full disk)
+                self._finish_current()
         if self._flusher is not threading.current_thread():
             self._flusher.join(timeout=5)
-        print(f"wrote {self.path}: {self.stats.written} messages, {self.stats.bytes / 1e6:.1f} MB"
+        names = ", ".join(str(f) for f in self.stats.files)  # more than one after a full disk
+        print(f"wrote {names}: {self.stats.written} messages, {self.stats.bytes / 1e6:.1f} MB"
               + (f", {self.stats.dropped} dropped ({self.stats.last_error})" if self.stats.dropped else ""),
               file=sys.stderr)
+
+    def _finish_current(self) -> None:
+        """(lock held, closing) Write the last chunk and the summary, close the file."""
+        data_ok = self._write_out()  # the last chunk first: it matters more than the summary
+        try:
+            self._writer.finish()
+            self._spool.commit()
+        except OSError as exc:
+            lost = self._spooled
+            self.stats.dropped += lost
+            self.stats.written -= lost
+            self.stats.last_error = exc.strerror or str(exc)
+            log.error("could not finish %s (%s): %s; the file stays readable without its summary",
+                      self.path, exc.strerror or exc,
+                      "summary not written" if data_ok else f"{lost} message(s) lost")
+        finally:
+            self._spooled = self.stats.pending = 0
+            self.stats.bytes = self._bytes_before + self._sink.tell()
+            os.close(self._fd)
 
     def __enter__(self) -> "Recorder":
         return self

@@ -4,19 +4,30 @@ Zenoh with the original timing (or as fast as possible) for a running ``samba-se
 In-process replay feeds :meth:`Server.ingest` with the recorded arrival stamps and the
 recorded mote joins/leaves, in file order, which is the order the live server processed
 them; the server's decisions depend only on those, so the poses equal the live ones.
+
+Republished packets carry their recorded arrival stamp in a Zenoh attachment
+(:data:`ATTACHMENT`); a live server (:class:`ReplayClock`) uses it, shifted to its own clock,
+as the arrival time. Frame grouping then sees the recorded timing even when the player runs
+faster than real time (``--speed max``): without it, packets arriving in a burst all look
+simultaneous and most frames fall apart.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import os
+import struct
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 from samba_common import zenoh_util as zk
 
-from .record import CALIBRATION_TOPIC, EVENTS_TOPIC, TakeReader
+from samba_common.pose_wire import FLAG_SOLVE_SKIPPED, PoseError, decode_pose
+
+from .record import CALIBRATION_TOPIC, EVENTS_TOPIC, POSE_TOPIC, TakeReader
 from .server import Server
 
 log = logging.getLogger(__name__)
@@ -29,11 +40,32 @@ def take_calibration(path: str | Path) -> bytes | None:
     return None
 
 
+def skipped_solves(path: str | Path) -> set[int] | None:
+    """Seqs of the recorded poses whose solve the live server skipped (``FLAG_SOLVE_SKIPPED``),
+    counted from the first recorded pose, or None when the take holds no poses (then nothing
+    is skipped)."""
+    seqs: set[int] = set()
+    first: int | None = None  # a recording started mid-run: seqs counted from its first pose
+    for m in TakeReader(path, topics=[POSE_TOPIC]):
+        try:
+            pose = decode_pose(m.data)
+        except PoseError:
+            continue
+        if first is None:
+            first = pose.seq
+        if pose.flags & FLAG_SOLVE_SKIPPED:
+            seqs.add(pose.seq - first)
+    return seqs if first is not None else None
+
+
 def replay_into(server: Server, path: str | Path, progress: Callable[[int], None] | None = None) -> TakeReader:
     """Feed every recorded packet and event of ``path`` into ``server`` and flush it.
 
-    Returns the reader (``.truncated`` tells whether the take ended early).
+    The frames whose solve the live server skipped (it was behind, ``max_lag_ms``) are skipped
+    again, so the poses equal the live ones. Returns the reader (``.truncated`` tells whether
+    the take ended early).
     """
+    server.skip_seqs = skipped_solves(path) or set()
     reader = TakeReader(path)
     for m in reader:
         mote = m.mote_id
@@ -54,10 +86,45 @@ def replay_into(server: Server, path: str | Path, progress: Callable[[int], None
     return reader
 
 
+#: attachment of a republished packet: magic, replay run id (u64), recorded arrival (i64 ns)
+ATTACHMENT = struct.Struct("<4sQq")
+ATTACHMENT_MAGIC = b"SMBR"
+
+
+class ReplayClock:
+    """Maps the recorded arrival stamps of republished packets onto the live server's clock.
+
+    Each replay run (its id in the attachment) gets one constant shift, chosen at its first
+    packet so that its stamps start now and after every stamp already given out: recorded
+    inter-arrival times are kept exactly, whatever the playback speed. Thread-safe.
+    """
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._run: int | None = None
+        self._shift = 0
+
+    def arrival_ns(self, attachment: bytes | None, now_ns: int, last_arrival_ns: int) -> int | None:
+        """The arrival stamp for a packet with ``attachment`` received at ``now_ns``, or None
+        when it carries no (valid) replay attachment (a live mote: stamp it on arrival)."""
+        if not attachment or len(attachment) != ATTACHMENT.size:
+            return None
+        magic, run, recorded = ATTACHMENT.unpack(attachment)
+        if magic != ATTACHMENT_MAGIC:
+            return None
+        with self._lock:
+            if run != self._run:
+                self._run = run
+                self._shift = max(now_ns, last_arrival_ns + 1) - recorded
+            return recorded + self._shift
+
+
 class Player:
     """Republish a take's mote packets on Zenoh, one liveliness token per recorded mote.
 
-    speed: 1.0 = original timing, 2.0 = twice as fast, None/0 = as fast as possible.
+    speed: 1.0 = original timing, 2.0 = twice as fast, None/0 = as fast as possible. Every
+    packet carries its recorded arrival stamp (:data:`ATTACHMENT`), so a live server groups
+    frames as the recording did, at any speed.
     """
 
     def __init__(self, path: str | Path, session: str = zk.DEFAULT_SESSION, connect=(), listen=(),
@@ -68,29 +135,52 @@ class Player:
         self.speed = speed
         self.sent = 0
 
-    def play(self, stop=None, wait_match: float = 5.0) -> int:
-        """Publish every packet; returns the number sent. ``stop``: optional threading.Event."""
+    def play(self, stop=None, wait_match: float = 5.0, max_join_gap: float = 0.6, quiet_s: float = 0.5,
+             drain_s: float = 60.0) -> int:
+        """Publish every packet; returns the number sent. ``stop``: optional threading.Event.
+
+        Every recorded mote's publisher is declared first (its subscriber waited for, up to
+        ``wait_match`` s); the recorded joins and leaves become liveliness tokens declared and
+        undeclared at their place in the take. After a join, the first packet waits for the
+        recorded join-to-packet gap (at most ``max_join_gap`` s, longer than the server's
+        250 ms ``dead_after``, even at ``--speed max``), so the server judges the new mote alive
+        or not as it did live. Leaves wait for the server to take in the last packets (see the
+        end); at ``--speed max`` a leave in the middle of the take is kept until the end."""
         import zenoh
 
+        run_id = int.from_bytes(os.urandom(8), "little")
+        motes = sorted({m.mote_id for m in TakeReader(self.path) if m.mote_id is not None})
         with zenoh.open(self.cfg) as z:
-            pubs: dict[str, object] = {}
-            tokens: list = []
+            pubs = {mote: z.declare_publisher(zk.markers_key(self.session_name, mote)) for mote in motes}
+            deadline = time.monotonic() + wait_match
+            while not all(p.matching_status.matching for p in pubs.values()) and time.monotonic() < deadline:
+                time.sleep(0.01)
+            if not all(p.matching_status.matching for p in pubs.values()):
+                log.warning("no subscriber for the markers of %s after %.1f s: is samba-server running on this "
+                            "session (%r) and endpoint?", ", ".join(motes), wait_match, self.session_name)
+            last_pose = [0.0]  # wall time of the server's last pose: the end waits for it to go quiet
+            pose_sub = z.declare_subscriber(zk.pose_key(self.session_name),
+                                            lambda _s: last_pose.__setitem__(0, time.monotonic()))
+            tokens: dict[str, object] = {}
+            join: tuple[int, float] | None = None  # (recorded, wall) time of the last join
             t_first = None
-            wall0 = time.monotonic()
+            wall0 = t_last = time.monotonic()
             for m in TakeReader(self.path):
                 if stop is not None and stop.is_set():
                     break
                 mote = m.mote_id
                 if mote is None:
+                    if m.topic == EVENTS_TOPIC:
+                        join = self._event(z, m, tokens) or join
                     continue
-                pub = pubs.get(mote)
-                if pub is None:
-                    tokens.append(z.liveliness().declare_token(zk.liveliness_key(self.session_name, mote)))
-                    pub = pubs[mote] = z.declare_publisher(zk.markers_key(self.session_name, mote))
-                    deadline = time.monotonic() + wait_match
-                    while not pub.matching_status.matching and time.monotonic() < deadline:
-                        time.sleep(0.01)
-                    if t_first is not None:  # do not count the wait in the timing
+                if mote not in tokens:  # a take recorded without events: the mote joins now
+                    tokens[mote] = z.liveliness().declare_token(zk.liveliness_key(self.session_name, mote))
+                    join = (m.log_time, time.monotonic())
+                if join is not None:
+                    gap = min(max(m.log_time - join[0], 0) / 1e9 / (self.speed or 1.0), max_join_gap)
+                    time.sleep(max(join[1] + gap - time.monotonic(), 0.0))
+                    join = None
+                    if t_first is not None:  # the wait does not shift the rest of the timing
                         wall0 = time.monotonic() - (m.log_time - t_first) / 1e9 / (self.speed or 1.0)
                 if t_first is None:
                     t_first, wall0 = m.log_time, time.monotonic()
@@ -99,9 +189,31 @@ class Player:
                     delay = due - time.monotonic()
                     if delay > 0:
                         time.sleep(delay)
-                pub.put(m.data)
+                pubs[mote].put(m.data, attachment=ATTACHMENT.pack(ATTACHMENT_MAGIC, run_id, m.log_time))
                 self.sent += 1
-            time.sleep(0.1)
-            for tok in tokens:
+            t_last = time.monotonic()
+            # Zenoh delivers data and liveliness on separate paths: leaving at once could reach the
+            # server before the last packets (at --speed max they queue up), so wait until the
+            # server has published no pose for quiet_s (at most drain_s)
+            end = time.monotonic() + drain_s
+            while time.monotonic() < end and time.monotonic() - max(last_pose[0], t_last) < quiet_s:
+                time.sleep(0.05)
+            pose_sub.undeclare()
+            for tok in tokens.values():
                 tok.undeclare()
         return self.sent
+
+    def _event(self, z, m, tokens: dict) -> tuple[int, float] | None:
+        """Declare/undeclare the token of a recorded join/leave; returns (recorded, wall) of a join."""
+        try:
+            ev = json.loads(m.data)
+            mote, joined = str(ev["mote_id"]), ev["event"] == "join"
+        except (ValueError, KeyError, TypeError):
+            log.warning("bad event record skipped: %r", m.data[:80])
+            return None
+        if joined and mote not in tokens:
+            tokens[mote] = z.liveliness().declare_token(zk.liveliness_key(self.session_name, mote))
+            return (m.log_time, time.monotonic())
+        if not joined and mote in tokens and self.speed:
+            tokens.pop(mote).undeclare()
+        return None

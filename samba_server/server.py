@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import logging
+from array import array
 import queue
 import threading
 import time
@@ -22,8 +23,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from samba_common.calib import CameraRig
-from samba_common.pose_wire import FLAG_INCOMPLETE, FLAG_LABEL_OVERRIDDEN, FLAG_SOLVED, PoseMessage, encode_pose
-from samba_common.skeleton import N_JOINTS, N_MARKERS
+from samba_common.pose_wire import (FLAG_INCOMPLETE, FLAG_LABEL_OVERRIDDEN, FLAG_SOLVE_SKIPPED, FLAG_SOLVED, PoseMessage,
+                                    encode_pose)
+from samba_common.skeleton import MARKER_JOINT, N_JOINTS, N_MARKERS
 from samba_common.wire import PacketError, decode_packet
 
 from .record import Recorder
@@ -58,7 +60,9 @@ class ServerStats:
     labels_overridden: int = 0
     solve_skipped: int = 0
     mote_packets: dict[str, int] = field(default_factory=dict)
-    latency_ms: list[float] = field(default_factory=list)
+    #: latency of the last poses (ms), the newest 50 000..100 000 kept; a compact array('d')
+    #: (8 bytes a pose) so that a long session's memory stays flat
+    latency_ms: array = field(default_factory=lambda: array("d"))
 
 
 PublishFn = Callable[[PoseMessage], None]
@@ -67,6 +71,17 @@ PublishFn = Callable[[PoseMessage], None]
 class Server:
     """See the module docstring. ``reconstructor``: an object with ``solve(markers (8,3), t)``
     returning ``.joints`` (13,3), ``.residual``, ``.n_markers`` (or None: markers only)."""
+
+    def _marker_view(self, joints: np.ndarray) -> np.ndarray:
+        """Joints (13, 3) for the labeller's predictions: with skin-marker offsets the marker
+        joints are replaced by the model markers (joint centre + offset), otherwise unchanged."""
+        markers_of = getattr(self.reconstructor, "markers_of", None)
+        offsets = getattr(self.reconstructor, "offsets", None)
+        if markers_of is None or offsets is None or not np.any(offsets):
+            return joints
+        view = joints.copy()
+        view[list(MARKER_JOINT)] = markers_of(joints)
+        return view
 
     def __init__(self, rig: CameraRig, calibration_toml: bytes | None = None, reconstructor=None,
                  config: ServerConfig | None = None, sync_config: SyncConfig | None = None,
@@ -97,6 +112,9 @@ class Server:
         self.packet_listeners: list[Callable] = []
         #: callables(PoseMessage) called with every pose after ``publish``
         self.pose_listeners: list[Callable] = []
+        #: replay: pose seqs whose solve the live server skipped (recorded FLAG_SOLVE_SKIPPED);
+        #: when set, it replaces the wall-clock lag test so a replay takes the same decisions
+        self.skip_seqs: set[int] | None = None
         if recorder is not None:
             recorder.write_calibration(self.calibration_toml, clock())
 
@@ -223,10 +241,14 @@ class Server:
         markers, mask, quality = self.markers_for(frame, t)
         joints = np.full((N_JOINTS, 3), np.nan)
         residual, flags = float("nan"), 0
-        lag_ms = (self.clock() - frame.t_ns) / 1e6
-        skip = self.config.max_lag_ms > 0 and lag_ms > self.config.max_lag_ms
+        if self.skip_seqs is not None:
+            skip = self._seq in self.skip_seqs
+        else:
+            lag_ms = (self.clock() - frame.t_ns) / 1e6
+            skip = self.config.max_lag_ms > 0 and lag_ms > self.config.max_lag_ms
         if skip:
             self.stats.solve_skipped += 1
+            flags |= FLAG_SOLVE_SKIPPED
         if self.reconstructor is not None and not skip:
             try:
                 r = self.reconstructor.solve(markers, t)
@@ -237,7 +259,7 @@ class Server:
             if np.isfinite(joints).all():
                 flags |= FLAG_SOLVED
                 self.stats.solved += 1
-                self.labeller.observe(t, joints)
+                self.labeller.observe(t, self._marker_view(joints))
         if not frame.complete:
             flags |= FLAG_INCOMPLETE
         if quality.overridden:
@@ -276,6 +298,33 @@ class Server:
             if recorder is not None:
                 recorder.write_calibration(self.calibration_toml, self.clock())
         return old
+
+    def report(self) -> dict:
+        """What the server saw, for operators and the fault-harness tests (docs/reliability.md).
+
+        ``frames``: emitted; ``degraded``: emitted with an alive mote missing; ``drops`` by
+        cause: ``late`` (its frame was already out), ``malformed`` (not a marker packet),
+        ``duplicate`` (seq seen again), ``unknown_mote`` (not in the calibration),
+        ``queue_overflow`` (server behind). ``motes``: per mote ``packets`` received,
+        ``late``, ``duplicate``, ``missing`` (degraded frames lacking it), ``restarts``,
+        ``clock_offset_ms`` (mote clock - server clock, up to the minimum latency) and
+        ``drift_ppm`` (+ = mote clock fast; None until 5 s of data).
+        """
+        sync = self.sync
+        sync.update_drift()
+        motes = {}
+        for m, st in sorted(sync.motes.items()):
+            drift = st.drift_ppm
+            motes[m] = {"packets": st.received, "late": st.late, "duplicate": st.duplicate, "missing": st.missing,
+                        "restarts": st.restarts, "clock_offset_ms": round(st.clock_offset_ms, 3),
+                        "drift_ppm": None if drift != drift else round(drift, 1)}
+        return {"frames": sync.frames_emitted, "degraded": sync.frames_incomplete, "solved": self.stats.solved,
+                "drops": {"late": sum(st.late for st in sync.motes.values()),
+                          "malformed": self.stats.bad_packets,
+                          "duplicate": sum(st.duplicate for st in sync.motes.values()),
+                          "unknown_mote": self.stats.unknown_motes,
+                          "queue_overflow": self.stats.queue_overflow},
+                "motes": motes}
 
     def joints_array(self) -> tuple[np.ndarray, np.ndarray]:
         """History as ((F, 13, 3) joints, (F,) seconds since the first frame)."""

@@ -49,7 +49,7 @@ def load_demo_take() -> tuple[np.ndarray, np.ndarray]:
     """The shipped clip with the standard pose in front: ((F, 13, 3) m, (F,) s) at 60 fps."""
     from samba_mote.sim.tpose import prepend_tpose
 
-    with files("samba_common").joinpath("data", "demo_take.npz").open("rb") as fh, np.load(fh) as z:
+    with files("samba_common").joinpath("data", "demo_take.npz").open("rb") as fh, np.load(fh, allow_pickle=False) as z:
         joints, t = z["joints"].astype(float), z["t"].astype(float)
     j, t, _ = prepend_tpose(joints, t, 60.0)
     return j, t
@@ -86,8 +86,11 @@ class SimMotes:
     """
 
     def __init__(self, rig: CameraRig, joints: np.ndarray, fps: float, session: str, connect: list[str],
-                 net: SimNetwork | None = None, loop: bool = False):
+                 net: SimNetwork | None = None, loop: bool = False, tls: str | None = None, mode: str = "peer"):
+        """tls: keys folder (samba-keys): each mote connects with its own certificate."""
         self.rig = rig
+        self.tls = tls
+        self.mode = mode  #: Zenoh mode of the motes' sessions ("client" behind a router)
         self.joints = joints
         self.fps = fps
         self.session = session
@@ -110,7 +113,12 @@ class SimMotes:
         import zenoh
 
         name = self.rig.names[m]
-        z = zenoh.open(zk.make_config(connect=self.connect))
+        extra = None
+        if self.tls:
+            from samba_common.keys import mote_settings
+
+            extra = mote_settings(self.tls, name)
+        z = zenoh.open(zk.make_config(mode=self.mode, connect=self.connect, extra=extra))
         self._sessions[m] = z
         self._tokens[m] = z.liveliness().declare_token(zk.liveliness_key(self.session, name))
         pub = z.declare_publisher(zk.markers_key(self.session, name), express=True)
@@ -237,9 +245,11 @@ def _main(argv: list[str] | None = None) -> int:
     ap.add_argument("--motes", type=int, default=4)
     ap.add_argument("--fps", type=float, default=60.0)
     ap.add_argument("--duration", type=float, default=5.0)
+    ap.add_argument("--tls", help="keys folder (samba-keys) for mutual TLS")
     args = ap.parse_args(argv)
     joints, _ = load_demo_take()
-    sim = SimMotes(default_rig(args.motes), joints, args.fps, args.session, [args.connect], loop=True)
+    sim = SimMotes(default_rig(args.motes), joints, args.fps, args.session, [args.connect], loop=True,
+                   tls=args.tls)
     if not sim.open_all(timeout=10):
         print("not matched", flush=True)
         return 1

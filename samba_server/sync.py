@@ -13,7 +13,14 @@ Packets join the pending frame whose anchor (first packet's corrected time) is w
 emitted when every live mote has contributed, or at its deadline (arrival clock):
 ``anchor + tolerance + max_wait``. A mote silent for ``dead_after_ms`` or reported gone is
 not waited for, so a dead mote never stalls the stream. Packets for frames already emitted
-are counted as late and dropped. All decisions depend only on the sequence of
+are counted as late and dropped; a packet whose sequence number was already seen recently
+(``dedup_window`` packets of that mote) is counted as a duplicate and dropped.
+
+Clock drift (a mote's crystal running fast or slow, up to a few hundred ppm) is estimated per
+mote from the lower envelope of the delays over the last ``drift_window_s`` (see
+:class:`_Drift`): ``drift_ppm = -slope * 1e6`` (positive = the mote's clock runs fast). The 4 s offset window already follows a 200 ppm drift to within
+0.8 ms, so grouping does not need the drift; it is reported (with the offset) so an operator
+sees a mote whose clock misbehaves. All decisions depend only on the sequence of
 (packet, arrival time) inputs, so a replay of the same inputs gives the same frames.
 """
 
@@ -37,6 +44,9 @@ class SyncConfig:
     offset_window_s: float = 4.0  #: sliding window of the per-mote minimum-delay filter
     dead_after_ms: float = 250.0  #: a mote silent this long is not waited for
     restart_seq_gap: int = 30  #: a backwards seq jump larger than this = mote restarted
+    dedup_window: int = 256  #: recent seqs remembered per mote to recognise duplicates
+    drift_block_s: float = 0.1  #: arrival-time block whose minimum delay is one drift sample
+    drift_window_s: float = 60.0  #: drift fitted over this many seconds of blocks (>= 5 s needed)
 
     def __post_init__(self) -> None:
         if self.fps <= 0 or not 0 < self.group_tolerance <= 1 or self.max_wait_ms < 0:
@@ -71,14 +81,21 @@ class Frame:
 
 @dataclass
 class MoteSyncStats:
-    """Per-mote counters."""
+    """Per-mote counters and clock estimates."""
 
     received: int = 0
-    late: int = 0
-    duplicate: int = 0
+    late: int = 0  #: dropped: its frame was already emitted
+    duplicate: int = 0  #: dropped: seq already seen
     restarts: int = 0  #: came back after a silence or a seq reset (clock estimate reset)
-    offset_ns: int = 0
+    missing: int = 0  #: frames emitted without this mote while it was alive (degraded frames)
+    offset_ns: int = 0  #: minimum delay arrival - capture (ns) = -(clock offset) + min latency
+    drift_ppm: float = float("nan")  #: clock rate error, + = mote clock fast (NaN until known)
     last_arrival_ns: int = 0
+
+    @property
+    def clock_offset_ms(self) -> float:
+        """Mote clock minus server clock (ms), up to the minimum transport latency."""
+        return -self.offset_ns / 1e6
 
 
 @dataclass
@@ -103,6 +120,52 @@ class _MinDelay:
         return self.q[0][1]
 
 
+class _Drift:
+    """Clock drift from the lower envelope of the delays (Moon, Skelly & Towsley, "Estimation
+    and removal of clock skew from network delay measurements", 1999): the minimum delay of
+    each ``block_ns`` block of arrival time is kept for the window; the drift is the slope of
+    the line under all of them closest to them in the mean (the edge of their lower convex
+    hull that spans their mean time), which jitter cannot bias. Computed on demand."""
+
+    def __init__(self, block_ns: int, n_blocks: int):
+        self.block_ns = block_ns
+        self.blocks: deque[tuple[int, int]] = deque(maxlen=max(n_blocks, 10))  # (block index, min delay)
+        self._cur: int | None = None
+        self._cur_min = 0
+
+    def add(self, arrival: int, delay: int) -> None:
+        b = arrival // self.block_ns
+        if self._cur is None or b != self._cur:
+            if self._cur is not None:
+                self.blocks.append((self._cur, self._cur_min))
+            self._cur, self._cur_min = b, delay
+        else:
+            self._cur_min = min(self._cur_min, delay)
+
+    @property
+    def ppm(self) -> float:
+        """Drift in ppm (+ = the mote's clock runs fast); NaN before 5 s of blocks."""
+        try:
+            pts = list(self.blocks)
+        except RuntimeError:  # pragma: no cover - mutated concurrently; next time
+            return float("nan")
+        if len(pts) < 2 or (pts[-1][0] - pts[0][0]) * self.block_ns < 5e9:
+            return float("nan")
+        b0, d0 = pts[0]
+        xy = [(float((b - b0) * self.block_ns), float(d - d0)) for b, d in pts]
+        hull: list[tuple[float, float]] = []
+        for p in xy:  # lower hull, x increasing
+            while len(hull) >= 2 and ((hull[-1][0] - hull[-2][0]) * (p[1] - hull[-2][1])
+                                      - (hull[-1][1] - hull[-2][1]) * (p[0] - hull[-2][0])) <= 0:
+                hull.pop()
+            hull.append(p)
+        xm = sum(x for x, _ in xy) / len(xy)
+        for (x1, y1), (x2, y2) in zip(hull, hull[1:]):
+            if x1 <= xm <= x2 and x2 > x1:
+                return -(y2 - y1) / (x2 - x1) * 1e6
+        return float("nan")
+
+
 class FrameSync:
     """Turn a stream of packets from several motes into frames (see the module docstring)."""
 
@@ -115,6 +178,8 @@ class FrameSync:
         self._pending: list[_Pending] = []
         self._delay: dict[str, _MinDelay] = {}
         self._last_seq: dict[str, int] = {}
+        self._seen: dict[str, tuple[set[int], deque[int]]] = {}  # recent seqs per mote
+        self._drift: dict[str, _Drift] = {}
         self._gone: dict[str, int] = {}  # mote -> time it left (arrival clock)
         self.motes: dict[str, MoteSyncStats] = {}
         self.now_ns = 0
@@ -133,8 +198,14 @@ class FrameSync:
             st.restarts += 1
         st.last_arrival_ns = max(st.last_arrival_ns, self.now_ns)
         self._gone.pop(mote_id, None)
+        self._forget(mote_id)
+
+    def _forget(self, mote_id: str) -> None:
+        """Reset a mote's clock estimates and seq history (it restarted)."""
         self._delay.pop(mote_id, None)
+        self._drift.pop(mote_id, None)
         self._last_seq.pop(mote_id, None)
+        self._seen.pop(mote_id, None)
 
     def mote_left(self, mote_id: str, t_ns: int | None = None) -> list[Frame]:
         """A mote is gone (at ``t_ns``): stop waiting for it; returns frames now complete."""
@@ -150,18 +221,33 @@ class FrameSync:
         st.last_arrival_ns = p.arrival_ns
         self._gone.pop(p.mote_id, None)
         last = self._last_seq.get(p.mote_id)
-        if last is not None and p.seq == last:
-            st.duplicate += 1
-            return out
-        if last is not None and (silent or p.seq < last - self.config.restart_seq_gap):
+        # a seq going back = the mote restarted (new clock, perhaps); a silence with the seq
+        # going on = packets lost on the way (a network outage): the clock estimates stay
+        if last is not None and (p.seq < last - self.config.restart_seq_gap or (silent and p.seq <= last)):
             st.restarts += 1
             log.info("mote %s is back (seq %d after %d): clock estimate reset", p.mote_id, p.seq, last)
-            self._delay.pop(p.mote_id, None)
-        self._last_seq[p.mote_id] = p.seq
+            self._forget(p.mote_id)
+            last = None
+        seen, order = self._seen.setdefault(p.mote_id, (set(), deque()))
+        if p.seq in seen:
+            st.duplicate += 1
+            return out
+        seen.add(p.seq)
+        order.append(p.seq)
+        if len(order) > self.config.dedup_window:
+            seen.discard(order.popleft())
+        self._last_seq[p.mote_id] = p.seq if last is None else max(last, p.seq)
         est = self._delay.get(p.mote_id)
         if est is None:
             est = self._delay[p.mote_id] = _MinDelay(int(self.config.offset_window_s * 1e9))
-        st.offset_ns = est.add(p.arrival_ns, p.arrival_ns - p.t_ns)
+        delay = p.arrival_ns - p.t_ns
+        st.offset_ns = est.add(p.arrival_ns, delay)
+        drift = self._drift.get(p.mote_id)
+        if drift is None:
+            c = self.config
+            drift = self._drift[p.mote_id] = _Drift(int(c.drift_block_s * 1e9),
+                                                    int(round(c.drift_window_s / c.drift_block_s)))
+        drift.add(p.arrival_ns, delay)
         p.tc_ns = p.t_ns + st.offset_ns
         if self.last_anchor is not None and p.tc_ns <= self.last_anchor + self._tol:
             st.late += 1
@@ -191,6 +277,12 @@ class FrameSync:
         self._pending = []
         return out
 
+    def update_drift(self) -> None:
+        """Compute every mote's ``drift_ppm`` now (a few ms: call it for reports, not per packet)."""
+        for m, st in list(self.motes.items()):
+            d = self._drift.get(m)
+            st.drift_ppm = d.ppm if d is not None else float("nan")
+
     # ------------------------------------------------------------------ internals
     def alive(self) -> list[str]:
         """Motes currently waited for: heard within ``dead_after_ms`` and not reported gone."""
@@ -201,12 +293,16 @@ class FrameSync:
         if not self._pending:
             return []
         alive = set(self.alive())
-        last_ready = -1
-        for i, fr in enumerate(self._pending):
+        ready = 0
+        # strictly in order: a complete frame never releases an older incomplete one early,
+        # whose packets may still be on their way (network jitter larger than a frame period)
+        for fr in self._pending:
             if fr.anchor + self._tol + self._wait <= self.now_ns or alive <= fr.packets.keys():
-                last_ready = i
-        out = [self._emit(fr, alive) for fr in self._pending[:last_ready + 1]]
-        del self._pending[:last_ready + 1]
+                ready += 1
+            else:
+                break
+        out = [self._emit(fr, alive) for fr in self._pending[:ready]]
+        del self._pending[:ready]
         return out
 
     def _emit(self, fr: _Pending, alive: set[str] | None = None) -> Frame:
@@ -222,4 +318,6 @@ class FrameSync:
         self.frames_emitted += 1
         if missing:
             self.frames_incomplete += 1
+            for m in missing:
+                self.motes[m].missing += 1
         return Frame(t, dict(sorted(fr.packets.items())), not missing, missing)

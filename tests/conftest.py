@@ -1,4 +1,4 @@
-"""Shared fixtures: where the shared CMU clips are (skipped tests name it when absent)."""
+"""Shared fixtures: where the shared CMU clips are (tests/shared_data.py; SAMBA_CMU_DIR or ../shared)."""
 
 from __future__ import annotations
 
@@ -6,11 +6,14 @@ from pathlib import Path
 
 import pytest
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "cmu-bvh"
+from tests.shared_data import CMU_DIR, CMU_SKIP
+
+SHARED = CMU_DIR
 
 
 @pytest.fixture(scope="session")
 def cmu_dir() -> Path:
-    if not SHARED.is_dir():
-        pytest.skip(f"shared CMU clips not found at {SHARED}")
-    return SHARED
+    """The CMU clips folder (``SAMBA_CMU_DIR`` or ``../shared/data/cmu-bvh``), else skip saying where."""
+    if not CMU_DIR.is_dir():
+        pytest.skip(CMU_SKIP)
+    return CMU_DIR

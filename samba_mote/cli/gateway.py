@@ -24,6 +24,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT")
     p.add_argument("--mode", default="peer", choices=["peer", "client"])
     p.add_argument("--scouting", action="store_true")
+    p.add_argument("--tls", metavar="KEYS_DIR", help="mutual TLS with the certificate of mote --id from samba-keys "
+                   "(KEYS_DIR/ca.crt, KEYS_DIR/motes/ID.*); endpoints tls/HOST:PORT (docs/security.md)")
+    p.add_argument("--id", help="with --tls: the serial mote's id (its packets under other ids are refused by the server)")
     p.add_argument("-v", "--verbose", action="count", default=0)
     args = p.parse_args(argv)
     logging.basicConfig(level=[logging.WARNING, logging.INFO, logging.DEBUG][min(args.verbose, 2)],
@@ -38,8 +41,23 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         print(f"samba-gateway: {exc}", file=sys.stderr)
         return 2
+    extra = None
+    if args.tls:
+        from samba_common import keys
+
+        if not args.id:
+            p.error("--tls needs --id (the serial mote's id, whose certificate is used)")
+        try:
+            keys.check_endpoints(args.listen + args.connect, "endpoint")
+        except ValueError as exc:
+            p.error(str(exc))
+        try:
+            extra = keys.mote_settings(args.tls, args.id)
+        except (keys.KeysError, ValueError) as exc:
+            print(f"samba-gateway: {exc}", file=sys.stderr)
+            return 1
     try:
-        session = zenoh.open(zk.make_config(args.mode, args.listen, args.connect, args.scouting))
+        session = zenoh.open(zk.make_config(args.mode, args.listen, args.connect, args.scouting, extra=extra))
     except Exception as exc:
         print(f"samba-gateway: cannot open zenoh session: {exc}", file=sys.stderr)
         return 1

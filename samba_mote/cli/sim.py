@@ -68,8 +68,8 @@ def main(argv: list[str] | None = None) -> int:
         "the volume centre away from where a walk starts, the body hiding markers.")
     p.add_argument("out", help="output directory")
     src = p.add_mutually_exclusive_group()
-    src.add_argument("--bvh", help="BVH clip (e.g. /work/shared/data/cmu-bvh/002_10.bvh)")
-    src.add_argument("--joints", help="joints.npz (FORMATS.md)")
+    src.add_argument("--bvh", help="BVH clip, e.g. a CMU clip: 02_01.bvh (default: a built-in synthetic walk)")
+    src.add_argument("--joints", help="joints.npz (docs/formats.md)")
     p.add_argument("--calibration", help="calibration.toml of the rig (default: default_rig(--cameras))")
     p.add_argument("--cameras", type=int, default=4, choices=[2, 4], help="default rig size (default 4)")
     p.add_argument("--rig-only", action="store_true", help="only write OUT/calibration.toml of the default rig")
@@ -98,6 +98,11 @@ def main(argv: list[str] | None = None) -> int:
                    help="video codec (default ffv1): ffv1 = lossless grey; mjpg = Motion-JPEG (yuvj420p, "
                    "as USB cameras send); h264 = if this OpenCV can encode it (else MPEG-4 mp4v with a warning, or an error); "
                    "camN.mp4 when the AVI container refuses the codec")
+    p.add_argument("--skin", action="store_true",
+                   help="markers on skin landmarks (acromion, lateral epicondyle, lateral malleolus, back of the "
+                        "wrist) with this subject's offsets (typical +-15 %%, from --seed) instead of joint centres")
+    p.add_argument("--wobble", type=float, default=0.0, metavar="MM",
+                   help="with --skin: soft-tissue wobble sigma in mm (e.g. 5; default 0)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("-v", "--verbose", action="count", default=0)
     args = p.parse_args(argv)
@@ -128,8 +133,16 @@ def main(argv: list[str] | None = None) -> int:
                       occlusion=not args.no_occlusion, tpose_stance=args.stance, pose_at=args.pose_at,
                       blackout=tuple(args.blackout), codec=args.codec)
         source = args.bvh or args.joints
+        if args.wobble < 0 or (args.wobble and not args.skin):
+            raise ValueError("--wobble needs --skin and a value >= 0 (mm)")
+        offsets = None
+        if args.skin:
+            import numpy as np
+
+            from samba_common.markerset import vary_offsets
+            offsets = vary_offsets(np.random.default_rng(args.seed))
         take = make_take(out, source, rig=rig, config=cfg, seed=args.seed, start=args.start, seconds=args.seconds,
-                         center=not args.no_center, on_warning=warn)
+                         center=not args.no_center, on_warning=warn, offsets=offsets, wobble=args.wobble / 1000.0)
     except (CalibrationError, FormatError, BvhError, ConfigError, OSError) as exc:  # the input files
         print(f"samba-sim: {exc}", file=sys.stderr)
         return 1

@@ -7,7 +7,8 @@ Output directory layout (FORMATS.md)::
                                (cam0.mp4 ... if the AVI container refuses it)
     calibration.toml           the rig used
     joints.npz                 ground-truth 13 joints (F, 13, 3) m and t (F,) s
-    markers.npz                ground-truth 8 markers (the marker joints), same frames
+    markers.npz                ground-truth 8 markers (the marker joints, or the skin landmarks with
+                               offsets), same frames, marker_placement ("joint_centres" / "skin")
     truth2d.npz                per camera: uv (C, F, 8, 2) px, visible (C, F, 8), radius (C, F, 8),
                                camera_names (C,), n_tpose (frames of lead-in: T-pose + blend),
                                fps, blackout (F,) bool, stance (m), codec, fourcc, videos (C,)
@@ -27,6 +28,7 @@ import numpy as np
 
 from samba_common.calib import CameraRig, default_rig
 from samba_common.formats import load_joints, save_joints, save_markers
+from samba_common.markerset import markers_from_joints, soft_tissue
 from samba_common.skeleton import J, MARKER_JOINT
 
 from .motion import synthetic_motion
@@ -221,7 +223,8 @@ def make_take(out_dir: str | os.PathLike, source: str | os.PathLike | np.ndarray
               rig: CameraRig | int = 2, config: SimConfig | None = None, seed: int = 0,
               start: float = 0.0, seconds: float | None = None, t: np.ndarray | None = None,
               center: bool = True, face_forward: bool = True, write: bool = True,
-              on_warning: Callable[[str], None] | None = None) -> SimTake:
+              on_warning: Callable[[str], None] | None = None, offsets: np.ndarray | None = None,
+              wobble: float = 0.0) -> SimTake:
     """Simulate a take into ``out_dir`` and return it.
 
     source: a .bvh or joints.npz path, a (F, 13, 3) joints array (with ``t``), or None for
@@ -229,6 +232,10 @@ def make_take(out_dir: str | os.PathLike, source: str | os.PathLike | np.ndarray
     ``default_rig``. write=False keeps everything in memory (no files). Warnings (a clip
     shorter than ``seconds``) go to ``on_warning`` (default: this module's logger) and
     ``SimTake.notes``. Lead-in, stance, blackout and codec: ``config`` (SimConfig).
+    offsets: (8, 3) skin-marker offsets (samba_common.markerset; None = markers on the joint
+    centres); wobble: soft-tissue wobble sigma (m) of skin markers. Skin markers are rendered and
+    written to markers.npz (with ``marker_placement`` and the true ``marker_offsets``);
+    joints.npz keeps the joint centres.
     """
     cfg = config or SimConfig()
     if cfg.codec.lower() not in CODECS:
@@ -252,7 +259,15 @@ def make_take(out_dir: str | os.PathLike, source: str | os.PathLike | np.ndarray
     joints, tt, n_pre = prepare_motion(joints, tt, cfg, center=center, face_forward=face_forward)
     first = joints[n_pre]  # the clip's first frame: its hip width sets "together"
     stance = stance_offset(cfg.tpose_stance, float(np.linalg.norm(first[J["left_hip"]] - first[J["right_hip"]])))
-    cams = render_take(joints, tt, rig, cfg, seed=seed)
+    markers = joints[:, list(MARKER_JOINT)]
+    shown = joints
+    if offsets is not None:
+        markers = markers_from_joints(joints, offsets)
+        if wobble > 0:
+            markers = soft_tissue(markers, np.random.default_rng(seed + 7919), wobble, fps=cfg.fps)
+        shown = joints.copy()
+        shown[:, list(MARKER_JOINT)] = markers  # the cameras see the landmarks
+    cams = render_take(shown, tt, rig, cfg, seed=seed)
     dark = blackout_frames(tt, cfg)
     out = Path(out_dir)
     videos: list[Path] = []
@@ -265,7 +280,11 @@ def make_take(out_dir: str | os.PathLike, source: str | os.PathLike | np.ndarray
             (on_warning or log.warning)(notes[-1])
         rig.save(out / "calibration.toml")
         save_joints(out / "joints.npz", joints, tt)
-        save_markers(out / "markers.npz", joints[:, list(MARKER_JOINT)], tt)
+        if offsets is None:
+            save_markers(out / "markers.npz", markers, tt, marker_placement=np.array("joint_centres"))
+        else:
+            save_markers(out / "markers.npz", markers, tt, marker_placement=np.array("skin"),
+                         marker_offsets=np.asarray(offsets, float), wobble=np.float64(wobble))
         np.savez_compressed(out / "truth2d.npz", uv=np.stack([c.uv for c in cams]),
                             visible=np.stack([c.visible for c in cams]),
                             radius=np.stack([c.radius for c in cams]),

@@ -15,7 +15,7 @@ from __future__ import annotations
 import glob
 import logging
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
@@ -133,6 +133,9 @@ class IntrinsicsResult:
     n_views: int  #: views with a detected board
     n_frames: int  #: frames read
     coverage: float  #: fraction of 8x6 image cells holding a detected corner
+    #: standard deviations (9,) of fx, fy, cx, cy (px), k1, k2, p1, p2, k3 (OpenCV's estimate
+    #: from the corner residuals); the wand step uses them as priors
+    std: np.ndarray = field(default_factory=lambda: np.full(9, np.nan))
 
 
 def calibrate_intrinsics(name: str, source: str | os.PathLike, board: Board, step: int = 1,
@@ -157,13 +160,16 @@ def calibrate_intrinsics(name: str, source: str | os.PathLike, board: Board, ste
         keep = np.linspace(0, len(objs) - 1, max_views).round().astype(int)
         objs, imgs = [objs[k] for k in keep], [imgs[k] for k in keep]
     flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
-    rms, K, dist, _, _ = cv2.calibrateCamera(objs, imgs, size, None, None, flags=flags)
+    rms, K, dist, _, _, std, _, _ = cv2.calibrateCameraExtended(objs, imgs, size, None, None, flags=flags)
     w, h = size
     allp = np.concatenate(imgs)
     cells = {(int(u * 8 // w), int(v * 6 // h)) for u, v in allp if 0 <= u < w and 0 <= v < h}
     cam = Camera(name, size, K, np.asarray(dist, float).ravel()[:5])
     log.info("%s: rms %.3f px from %d views, coverage %.0f %%", name, rms, len(objs), 100 * len(cells) / 48)
-    return IntrinsicsResult(cam, float(rms), len(objs), n, len(cells) / 48.0)
+    sd = np.full(9, np.nan)
+    got = np.asarray(std, float).ravel()[:9]
+    sd[:len(got)] = got
+    return IntrinsicsResult(cam, float(rms), len(objs), n, len(cells) / 48.0, sd)
 
 
 def render_board_views(camera: Camera, board: Board, n_views: int = 12, seed: int = 0,

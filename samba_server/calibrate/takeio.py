@@ -191,6 +191,8 @@ def read_take(take: str | os.PathLike, names: list[str], K: int | None, progress
     if not p.exists():
         raise TakeError(f"{p}: not found")
     if p.is_dir():
+        if (p / "take.npz").exists() and not any(p.glob(f"{names[0]}.*")):
+            return read_npz(p / "take.npz", names, K)  # a `samba-calibrate simulate` folder
         return read_videos(p, names, K, progress, rig, fps)
     if p.suffix == ".mcap":
         return read_mcap(p, names, K)

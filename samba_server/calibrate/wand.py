@@ -11,9 +11,13 @@ see exactly K blobs. Steps:
 2. every other camera, in order of shared frames: PnP (RANSAC, both matchings) against the
    triangulated wand ends;
 3. per frame, the labelling of the ends in every view that minimises reprojection error;
-4. bundle adjustment over all camera poses and all wand positions (rigid wand of the given
-   length = metric scale), robust loss, one more pass without outlier observations;
-5. world frame: provisional (Z up from the mean camera "up", origin under the wand centroid,
+4. bundle adjustment over all camera poses, the intrinsics a wand can see (focal length,
+   principal point, k1, k2; each held by a prior from the board step) and all wand positions
+   (rigid wand of the given length = metric scale), robust loss, one more pass without outlier
+   observations with the priors weighed by the measured pixel noise;
+5. uncertainties of the camera centres and of the scale from the adjustment's covariance
+   (:mod:`samba_server.calibrate.uncertainty`);
+6. world frame: provisional (Z up from the mean camera "up", origin under the wand centroid,
    floor at the lowest wand marker) until ``floor`` sets it properly.
 """
 
@@ -28,6 +32,7 @@ import numpy as np
 
 from samba_common.calib import Camera, CameraRig
 from samba_server.calibrate.bundle import Observations, bundle_adjust, camera_from_pose, transform_rig
+from samba_server.calibrate.uncertainty import RigUncertainty, rig_uncertainty
 from samba_server.triangulate import TriangulateConfig, Triangulator
 
 log = logging.getLogger(__name__)
@@ -35,6 +40,48 @@ log = logging.getLogger(__name__)
 
 class CalibrateError(RuntimeError):
     """The data cannot determine the calibration (too few shared views, unseen cameras...)."""
+
+
+#: intrinsics the wand adjustment refines by default (names of ``bundle.INTRINSIC_PARAMS``)
+REFINE_INTRINSICS = ("f", "cx", "cy", "k1", "k2")
+
+#: metadata key prefix of a camera's intrinsic standard deviations from the board step:
+#: ``intrinsics_std_<camera> = [fx, fy, cx, cy, k1, k2, p1, p2, k3]`` (px, px, px, px, 1...)
+STD_KEY = "intrinsics_std_"
+
+
+def default_prior_sigma(cam: Camera) -> np.ndarray:
+    """Prior standard deviations (5,) for f, cx, cy, k1, k2 when the board step gave none:
+    2 % of the focal length, 3 % of the image width for the principal point, 0.05 for k1, k2."""
+    w = float(cam.size[0])
+    return np.array([0.02 * cam.matrix[0, 0], 0.03 * w, 0.03 * w, 0.05, 0.05])
+
+
+def prior_sigma(rig: CameraRig, names: tuple[str, ...]) -> np.ndarray:
+    """(C, len(names)) prior standard deviations of the intrinsics ``names`` for every camera:
+    the board step's (``metadata[intrinsics_std_<camera>]``, floored at 1/10 of
+    :func:`default_prior_sigma` so a prior never freezes a parameter). A camera without them
+    (intrinsics from elsewhere, whose accuracy is unknown) keeps its intrinsics: its priors
+    are 1e-6 of the defaults."""
+    from samba_server.calibrate.bundle import INTRINSIC_PARAMS
+
+    out = []
+    for cam in rig.cameras:
+        d = default_prior_sigma(cam)
+        std = rig.metadata.get(STD_KEY + cam.name)
+        board = None
+        if isinstance(std, (list, tuple)) and len(std) >= 6:
+            sd = np.asarray(std[:6], dtype=float)
+            board = np.array([0.5 * (sd[0] + sd[1]), sd[2], sd[3], sd[4], sd[5]])
+            if not (np.all(np.isfinite(board)) and np.all(board > 0)):
+                board = None
+        if board is None:
+            log.info("%s: no board-step uncertainties in the calibration file: intrinsics kept as given", cam.name)
+            d = 1e-6 * d
+        else:
+            d = np.maximum(board, 0.1 * d)
+        out.append([d[INTRINSIC_PARAMS.index(n)] for n in names])
+    return np.array(out, dtype=float).reshape(len(rig), len(names))
 
 
 @dataclass
@@ -48,6 +95,8 @@ class WandReport:
     n_frames: int  #: wand positions used
     coverage: dict[str, float] = field(default_factory=dict)  #: "camA-camB" -> fraction of volume cells
     pair_frames: dict[str, int] = field(default_factory=dict)  #: "camA-camB" -> frames seen by both
+    uncertainty: RigUncertainty | None = None  #: centre / scale uncertainties (covariance)
+    intrinsics_change: dict[str, str] = field(default_factory=dict)  #: camera -> "fx +0.62 px ..." line
 
     @property
     def rms_total(self) -> float:
@@ -59,6 +108,16 @@ class WandReport:
                f"wand length: mean {self.wand_mean_m * 1000:.2f} mm, sigma {self.wand_sigma_m * 1000:.2f} mm",
                f"reprojection rms: {self.rms_total:.3f} px overall"]
         out += [f"  {k}: {self.rms_px[k]:.3f} px over {self.n_obs[k]} observations" for k in self.rms_px]
+        u = self.uncertainty
+        if u is not None:
+            out.append(f"uncertainty (95 %, from the adjustment's covariance, pixel noise {u.sigma_px:.3f} px per axis):")
+            out.append(f"  scale: +-{196 * u.scale_sigma:.3f} % (plus the error of the wand length itself)")
+            for k, name in enumerate(self.rms_px):
+                f = "" if not np.isfinite(u.focal_sigma_px[k]) else f", focal length +-{1.96 * u.focal_sigma_px[k]:.2f} px"
+                out.append(f"  {name}: centre within {1000 * u.centre_95_m[k]:.1f} mm{f}")
+        if self.intrinsics_change:
+            out.append("intrinsics refined by the wand (change from the input):")
+            out += [f"  {k}: {v}" for k, v in self.intrinsics_change.items()]
         out.append("coverage per camera pair (shared frames, fraction of the 4x4x2 m volume in 0.5 m cells):")
         out += [f"  {k}: {self.pair_frames.get(k, 0)} frames, {v * 100:.0f} %" for k, v in self.coverage.items()]
         return out
@@ -196,8 +255,11 @@ def calibrate_wand(
     max_error_px: float = 3.0,
     max_tries: int = 4,
     max_frames: int = 3000,
+    refine: tuple[str, ...] = REFINE_INTRINSICS,
 ) -> tuple[CameraRig, WandReport]:
-    """Extrinsics of all cameras of ``rig`` (intrinsics kept) from wand observations.
+    """Extrinsics of all cameras of ``rig`` from wand observations, refining the intrinsics
+    ``refine`` (names of ``bundle.INTRINSIC_PARAMS``; ``()`` keeps them) around their input
+    values with priors from ``rig.metadata`` (:func:`prior_sigma`).
 
     uv: (F, C, K, 2) raw pixels, unlabelled per view, NaN where not seen; offsets: (K,)
     metres of the markers along the wand (e.g. [0, 0.5]); at most ``max_frames`` frames seen
@@ -208,6 +270,9 @@ def calibrate_wand(
     cams0 = rig.cameras
     F, C, Kw, _ = uv.shape
     offsets = np.asarray(offsets, dtype=float)
+    if refine and not any(STD_KEY + c.name in rig.metadata for c in cams0):
+        log.info("no board-step uncertainties in the calibration file: intrinsics kept as given")
+        refine = ()
     if C != len(cams0) or len(offsets) != Kw or Kw < 2:
         raise ValueError("uv must be (F, C, K, 2) with C cameras and K = len(offsets) >= 2")
     L = float(offsets[-1] - offsets[0])
@@ -238,7 +303,8 @@ def calibrate_wand(
             break
         try:
             cams, uv_i, pts, rms = _initialise(cams0, uv, xy, seen, i, j, L, min_frames, max_error_px)
-            cams, pts, rep = _adjust(cams, uv_i, pts, rms, offsets, i, max_error_px)
+            cams, pts, rep = _adjust(cams, uv_i, pts, rms, offsets, i, max_error_px, refine,
+                                     prior_sigma(rig, refine) if refine else None)
         except CalibrateError as exc:
             errors.append(str(exc))
             log.info("initialisation from %s-%s failed: %s", cams0[i].name, cams0[j].name, exc)
@@ -258,7 +324,18 @@ def calibrate_wand(
     _, cams, pts, rep, uv = best
     cams = _scale_and_world(cams, pts[np.all(np.isfinite(pts), axis=2)].reshape(-1, 3))
     out = CameraRig(cams, dict(rig.metadata))
-    return out, _report(out, uv, offsets, rep)
+    report = _report(out, uv, offsets, rep)
+    try:
+        report.uncertainty = rig_uncertainty(rep["result"])
+    except (np.linalg.LinAlgError, ValueError) as exc:  # singular: report without it
+        log.warning("no uncertainty: the adjustment's covariance is singular (%s)", exc)
+    if refine:
+        for c0, c1 in zip(cams0, cams):
+            dk = c1.matrix - c0.matrix
+            dd = c1.dist[:2] - c0.dist[:2]
+            report.intrinsics_change[c0.name] = (f"fx {dk[0, 0]:+.2f} px, cx {dk[0, 2]:+.2f} px, cy {dk[1, 2]:+.2f} px, "
+                                                 f"k1 {dd[0]:+.4f}, k2 {dd[1]:+.4f}")
+    return out, report
 
 
 def _initialise(cams0, uv, xy, seen, i, j, L, min_frames, max_error_px):
@@ -303,17 +380,25 @@ def _initialise(cams0, uv, xy, seen, i, j, L, min_frames, max_error_px):
     return cams, uv, pts, rms
 
 
-def _adjust(cams, uv, pts, rms, offsets, ref, max_error_px):
-    """Bundle adjustment with the rigid wand; a second pass without outlier observations."""
+def _adjust(cams, uv, pts, rms, offsets, ref, max_error_px, refine=(), sigma_prior=None):
+    """Bundle adjustment with the rigid wand; a second pass without outlier observations
+    (always made when intrinsics are refined: the priors are then weighed with the pixel
+    noise measured in the first pass). The intrinsics' priors stay centred on the input."""
     F, C, Kw, _ = uv.shape
     use = np.isfinite(rms) & (rms < 5 * max_error_px)
+    cams_in = cams
+    sigma_px = 0.3
     for it in range(2):
         fr = np.flatnonzero(use)
         vis = np.all(np.isfinite(uv[fr]), axis=-1)  # (n, C, K)
         fi, ci, ki = np.nonzero(vis)
         obs = Observations(ci, fi * Kw + ki, uv[fr][fi, ci, ki])
+        if refine and it == 1:  # restart the intrinsics at their input values (prior centre)
+            cams = [Camera(c.name, c.size, c0.matrix.copy(), c0.dist.copy(), c.rvec, c.tvec)
+                    for c, c0 in zip(cams, cams_in)]
         res = bundle_adjust(cams, obs, pts[fr].reshape(-1, 3), wand_offsets=offsets, fixed=(ref,),
-                            f_scale=1.0 if it == 0 else max_error_px)
+                            f_scale=1.0 if it == 0 else max_error_px, intrinsics=tuple(refine),
+                            prior_sigma=sigma_prior, sigma_px=sigma_px)
         cams = res.cameras
         pts = np.full((F, Kw, 3), np.nan)
         pts[fr] = res.points.reshape(-1, Kw, 3)
@@ -326,9 +411,13 @@ def _adjust(cams, uv, pts, rms, offsets, ref, max_error_px):
             cnt = np.sum(np.all(np.isfinite(uv), axis=(2, 3)), axis=1)
             use &= cnt >= 2
             log.info("dropped %d outlier observations (> %.1f px)", int(bad.sum()), max_error_px)
-        else:
+        elif not (it == 0 and refine):
             break
-    rep = {"obs": obs, "residuals": res.residuals, "frames": fr}
+        if it == 0 and refine:
+            good = res.residuals[~bad]
+            if len(good):
+                sigma_px = max(float(np.sqrt(np.mean(good * good))), 0.02)
+    rep = {"obs": obs, "residuals": res.residuals, "frames": fr, "result": res}
     return cams, pts, rep
 
 
@@ -366,4 +455,5 @@ def _report(rig: CameraRig, uv: np.ndarray, offsets: np.ndarray, rep: dict) -> W
     return WandReport(rms, nobs, float(np.mean(lengths)), float(np.std(lengths)), len(fr), cov, pairs)
 
 
-__all__ = ["CalibrateError", "WandReport", "calibrate_wand", "normalized"]
+__all__ = ["CalibrateError", "REFINE_INTRINSICS", "STD_KEY", "WandReport", "calibrate_wand", "default_prior_sigma",
+           "normalized", "prior_sigma"]

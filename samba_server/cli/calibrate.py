@@ -20,7 +20,9 @@ log = logging.getLogger("samba_server.calibrate")
 
 def _load_rig(path: str | None, what: str) -> CameraRig:
     if path is None:
-        raise CalibrationError(None, None, f"{what}: give the cameras' intrinsics with --calib FILE")
+        raise CalibrationError(None, None, f"{what}: give the cameras' intrinsics with --calib FILE (from "
+                               "`samba-calibrate intrinsics --camera cam0 BOARD_DIR --board ... --out FILE`, "
+                               "once per camera; see docs/calibration.md)")
     return CameraRig.load(path)
 
 
@@ -91,11 +93,17 @@ def cmd_intrinsics(a: argparse.Namespace) -> int:
         rig = rig.replace(cam)
     else:
         rig = CameraRig([cam])
+    from samba_server.calibrate.wand import STD_KEY
+
+    rig.metadata[STD_KEY + a.camera] = [float(v) for v in res.std]  # priors of the wand step
+    rig.metadata["source"] = "samba-calibrate intrinsics"
     rig.save(out)
     print(f"{a.camera}: rms {res.rms_px:.3f} px from {res.n_views} of {res.n_frames} frames; "
           f"coverage {res.coverage * 100:.0f} % of the image (8x6 cells)")
     print(f"  fx {cam.matrix[0, 0]:.2f} fy {cam.matrix[1, 1]:.2f} cx {cam.matrix[0, 2]:.2f} cy {cam.matrix[1, 2]:.2f}"
           f" dist {np.array2string(cam.dist, precision=4)}")
+    print(f"  95 % uncertainty: focal length +-{1.96 * res.std[0]:.2f} px, principal point "
+          f"+-{1.96 * max(res.std[2], res.std[3]):.2f} px (the wand step refines them)")
     if res.coverage < 0.5:
         print("  warning: corners cover less than half of the image; move the board into the corners")
     print(f"wrote {out}")
@@ -113,9 +121,21 @@ def cmd_extrinsics(a: argparse.Namespace) -> int:
     bar, cb = _progress("wand frames")
     with bar:
         uv = read_take(a.take, rig.names, len(offsets), cb)
-    out, rep = calibrate_wand(rig, uv, offsets, min_frames=a.min_frames)
+    refine = () if a.fix_intrinsics else None
+    out, rep = calibrate_wand(rig, uv, offsets, min_frames=a.min_frames,
+                              **({} if refine is None else {"refine": refine}))
     if a.floor:
         out = _floor_from_lframe(out, a.floor, a.lframe, a.lframe_height)
+    # say where this file came from (not the intrinsics file's "source")
+    intr_src = rig.metadata.get("source")
+    out.metadata["source"] = (f"samba-calibrate extrinsics {Path(a.take).name} --wand {a.wand:g}"
+                              + (f" --floor {Path(a.floor).name}" if a.floor else ""))
+    if intr_src is not None:
+        out.metadata["intrinsics_source"] = str(intr_src)
+    out.metadata["wand_positions"] = int(rep.n_frames)
+    if rep.uncertainty is not None:
+        out.metadata["scale_sigma"] = float(rep.uncertainty.scale_sigma)
+        out.metadata["centre_95_m"] = [float(v) for v in rep.uncertainty.centre_95_m]
     out.save(a.out)
     print("\n".join(rep.lines()))
     if not a.floor:
@@ -177,7 +197,7 @@ def cmd_simulate(a: argparse.Namespace) -> int:
         for cam in rig.cameras:
             d = out / cam.name
             d.mkdir(exist_ok=True)
-            for i, img in enumerate(render_board_views(cam, board, a.frames or 20, seed=a.seed)):
+            for i, img in enumerate(render_board_views(cam, board, a.frames or 60, seed=a.seed)):
                 cv2.imwrite(str(d / f"board_{i:03d}.png"), img)
         print(f"wrote board images per camera under {out}")
         return 0
@@ -226,6 +246,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="calibration.toml to write")
     s.add_argument("--floor", help="L-frame take (3 markers) to set origin, Z up and heading")
     s.add_argument("--min-frames", type=int, default=20, help="wand frames two cameras must share")
+    s.add_argument("--fix-intrinsics", action="store_true",
+                   help="keep the intrinsics as given (default: refine focal length, principal point, k1, k2 "
+                        "around them, with the board step's uncertainties as priors)")
     lframe_opts(s)
     s.set_defaults(func=cmd_extrinsics)
 
@@ -255,7 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("kind", choices=["wand", "lframe", "board", "subject"])
     s.add_argument("--out", required=True, help="output directory")
     s.add_argument("--cameras", type=int, default=4, choices=[2, 4])
-    s.add_argument("--frames", type=int, default=0, help="frames (default: wand 600, lframe 60, board 20)")
+    s.add_argument("--frames", type=int, default=0, help="frames (default: wand 600, lframe 60, board 60 views per camera)")
     s.add_argument("--seconds", type=float, default=8.0, help="subject take length")
     s.add_argument("--noise", type=float, default=0.2, help="pixel noise sigma")
     s.add_argument("--wand", type=float, default=0.5)

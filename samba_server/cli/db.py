@@ -35,7 +35,11 @@ def _expand(sources: list[str]) -> list[Path]:
 
 
 def _info(db: MotionDB, path: str) -> str:
-    lines = [f"{path}: {len(db)} poses from {len(db.clip_names)} clips at {db.fps:g} fps"]
+    names = [str(n) for n in db.clip_names]
+    n_clips = sum(not n.endswith("~mirror") for n in names)
+    mirrored = len(names) - n_clips
+    lines = [f"{path}: {len(db)} poses from {n_clips} clips at {db.fps:g} fps"
+             + (f" ({mirrored} of them also mirrored left-right)" if mirrored else "")]
     lines.append("mean bone lengths (m): " + ", ".join(f"{n} {v:.3f}" for n, v in zip(BONE_TYPES, db.mean_lengths)))
     counts = np.bincount(db.clip, minlength=len(db.clip_names))
     shown = [f"{n} ({c})" for n, c in zip(db.clip_names, counts) if not str(n).endswith("~mirror")]
@@ -73,6 +77,16 @@ def main(argv: list[str] | None = None) -> int:
         base = None
         if args.add_to:
             base = MotionDB.load(default_db_path() if args.add_to == "default" else args.add_to)
+            have = {str(n) for n in base.clip_names}
+            dup = [f for f in files if f.stem in have]
+            files = [f for f in files if f.stem not in have]
+            if dup:
+                print(f"samba-db: {len(dup)} clip(s) already in {args.add_to}, not added again: "
+                      + ", ".join(f.stem for f in dup[:10]) + (" ..." if len(dup) > 10 else ""), file=sys.stderr)
+            if not files:
+                base.save(args.out)
+                print(_info(base, args.out))
+                return 0
         with Progress(len(files), "building") as bar:
             db = build_db(files, args.mapping, fps=args.fps, min_change_deg=args.min_change, mirror=not args.no_mirror,
                           progress=lambda _s: bar.update(), base=base)

@@ -4,6 +4,7 @@ export of its recorded poses (joints.npz / CSV / plot)."""
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 
 from samba_server.export.csvfile import write_joints_csv
@@ -17,7 +18,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--csv", metavar="OUT.csv", help="write the recorded poses as CSV")
     ap.add_argument("--plot", metavar="OUT.png",
                     help="plot marker visibility per mote, joint trajectories and latency over time")
+    ap.add_argument("-v", "--verbose", action="count", default=0, help="log progress (-vv: debug)")
     args = ap.parse_args(argv)
+    if args.verbose:
+        logging.basicConfig(level=logging.INFO if args.verbose == 1 else logging.DEBUG,
+                            format="%(levelname)s %(name)s: %(message)s")
     try:
         s = summarize(args.take)
     except (OSError, ValueError) as exc:

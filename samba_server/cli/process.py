@@ -13,6 +13,7 @@ from samba_common.calib import CalibrationError
 from samba_common.config import ConfigError
 from samba_common.formats import save_joints
 from samba_common.progress import Progress
+from samba_server.activity import MoteActivity
 from samba_server.app import build_server, load_server_configs, setup_logging
 from samba_server.process import VideoError, _open_video, process_videos
 from samba_server.record import RecorderError
@@ -36,17 +37,20 @@ def main(argv: list[str] | None = None) -> int:
     if len({v.stem for v in videos}) != len(videos):
         ap.error("two videos have the same camera name")
     try:
+        if args.fps is not None and args.fps <= 0:
+            ap.error("--fps must be > 0")
+        import cv2
+
+        cap = _open_video(videos[0])
+        file_fps = float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        cap.release()
         fps = args.fps
         if fps is None:
-            import cv2
-
-            cap = _open_video(videos[0])
-            fps = float(cap.get(cv2.CAP_PROP_FPS)) or 30.0
-            cap.release()
-            if not 1.0 <= fps <= 1000.0:
-                fps = 30.0
-        if fps <= 0:
-            ap.error("--fps must be > 0")
+            fps = file_fps if 1.0 <= file_fps <= 1000.0 else 30.0
+        elif 1.0 <= file_fps <= 1000.0 and abs(fps - file_fps) > 0.01 * file_fps:
+            print(f"samba-process: WARNING: --fps {fps:g} but {videos[0]} says {file_fps:g} fps; frame times, "
+                  f"frame grouping and the solver's smoothing use {fps:g} (leave --fps out to use the file's)",
+                  file=sys.stderr)
         mote_config = None
         if args.mote_config:
             from samba_mote.pipeline import load_mote_config
@@ -61,8 +65,9 @@ def main(argv: list[str] | None = None) -> int:
             cap = _open_video(v)
             total = max(total, int(cap.get(cv2.CAP_PROP_FRAME_COUNT)))
             cap.release()
+        activity = MoteActivity(server.rig.names)
         with Progress(total, "samba-process") as bar:
-            joints, t, extra = process_videos(server, videos, fps, mote_config, bar)
+            joints, t, extra = process_videos(server, videos, fps, mote_config, bar, activity)
         if server.recorder is not None:
             server.recorder.close()
         save_joints(args.out, joints, t, **extra)
@@ -71,6 +76,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     solved = int(np.isfinite(joints).all(axis=(1, 2)).sum())
     print(f"wrote {args.out}: {len(t)} frames, {solved} solved", file=sys.stderr)
+    for line in activity.warnings():
+        print(f"samba-process: WARNING: {line}", file=sys.stderr)
     if solved < 0.5 * len(t):
         print(f"samba-process: WARNING: only {solved} of {len(t)} frames solved: {failure_reason(server)}",
               file=sys.stderr)

@@ -11,6 +11,7 @@ from pathlib import Path
 from samba_common.calib import CalibrationError, CameraRig
 from samba_common.config import ConfigError
 from samba_common.progress import Progress
+from samba_server.activity import MoteActivity
 from samba_server.app import add_network_args, export_joints, load_server_configs, make_reconstructor, setup_logging
 from samba_server.record import TakeReader
 from samba_server.replay import Player, replay_into, take_calibration
@@ -46,17 +47,21 @@ def main(argv: list[str] | None = None) -> int:
             if toml is None:
                 print("samba-replay: the take has no calibration; pass --calibration", file=sys.stderr)
                 return 1
-            rig = CameraRig.loads(toml)
+            rig = CameraRig.loads(toml, path=args.calibration or f"{args.take} (its recorded calibration)")
             cfg = load_server_configs(args.config)
             server = Server(rig, toml, make_reconstructor(args.db, cfg.reconstruct),
                             ServerConfig(**{**cfg.server.__dict__, "max_lag_ms": 0.0}), cfg.sync, cfg.triangulate,
                             label_config=cfg.labelling)
+            activity = MoteActivity(rig.names)
+            server.packet_listeners.append(activity)
             n = sum(1 for _ in TakeReader(args.take))
             with Progress(n, "samba-replay") as bar:
                 reader = replay_into(server, args.take, bar.update)
             frames = export_joints(server, args.out)
             note = " (take truncated: read up to its last complete record)" if reader.truncated else ""
-            print(f"wrote {args.out}: {frames} frames{note}", file=sys.stderr)
+            print(f"wrote {args.out}: {frames} frames, {server.stats.solved} solved{note}", file=sys.stderr)
+            for line in activity.warnings():
+                print(f"samba-replay: WARNING: {line}", file=sys.stderr)
             return 0
         stop = threading.Event()
         player = Player(args.take, args.session, args.connect, args.listen, speed)

@@ -18,6 +18,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--record", metavar="TAKE.mcap", help="record packets, calibration and poses")
     ap.add_argument("--export", metavar="JOINTS.npz", help="write every pose to joints.npz at exit")
     ap.add_argument("--db", help="motion database (.npz) for the solver (default: the shipped one)")
+    ap.add_argument("--subject", metavar="SUBJECT.toml",
+                    help="subject (bone lengths + skin-marker offsets) from samba-subject calibrate; default: "
+                         "bone lengths measured from the standard pose, markers on the joint centres")
     ap.add_argument("--config", help="server TOML (default: the packaged configs/server.toml)")
     ap.add_argument("--fps", type=float, help="nominal mote frame rate (overrides [sync] fps)")
     ap.add_argument("--http", metavar="[HOST:]PORT", help="serve the browser viewer")
@@ -28,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     setup_logging(args.verbose)
     try:
         configs = load_server_configs(args.config, fps=args.fps)
-        server = build_server(args.calibration, configs, args.db, args.record)
+        server = build_server(args.calibration, configs, args.db, args.record, subject=args.subject)
     except (ConfigError, CalibrationError, RecorderError, OSError, ValueError) as exc:
         print(f"samba-server: {exc}", file=sys.stderr)
         return 1

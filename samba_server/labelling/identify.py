@@ -7,11 +7,13 @@ the pair of high points a shoulder width apart; each ordering of the pair is one
 reach of their side's shoulder; wrists are points within an arm of their shoulder. Every
 labelling these rigid lengths allow is scored:
 
-- +1 per marker named (a hidden marker may stay unnamed),
+- +1 per marker named (a hidden marker may stay unnamed; a merged point shared by both knees
+  or both ankles names two),
 - rigid-length errors, and trust in the points (2-view points that other views should have seen),
 - facing: agreement with the facing the subject had (the standard pose faces +Y; after a
   loss, the last facing, trusted less the longer ago) and with the direction of travel,
-- anatomy: knees bend backwards, the left leg is on the left.
+- anatomy: knees bend backwards and hang about a trunk below the shoulders, the left leg is on
+  the left.
 
 The best labelling wins; its margin over the runner-up tells how sure the naming is.
 """
@@ -28,6 +30,14 @@ from .rigid import LA, LK, LS, LW, RA, RK, RS, RW, Body
 __all__ = ["Hint", "Hypothesis", "identify"]
 
 _UP = np.array([0.0, 0.0, 1.0])
+#: a right knee (ankle) less than _LATERAL_M m to the subject's right of the left one costs
+#: _LATERAL_W per metre: legs cross little, so a swapped pair costs about 1
+_LATERAL_W, _LATERAL_M = 4.0, 0.03
+#: shoulders more than _TILT_M m apart in height cost _TILT_W per metre (a wrist at shoulder
+#: height a shoulder width away is not a shoulder)
+_TILT_W, _TILT_M = 10.0, 0.06
+#: a knee nearer its shoulder than _NEAR_F trunks costs _NEAR_W per metre (at most 2)
+_NEAR_W, _NEAR_F = 8.0, 0.75
 
 
 @dataclass
@@ -64,15 +74,19 @@ def _leg_options(X: np.ndarray, free: list[int], s: np.ndarray, body: Body) -> l
     reach_k = body.trunk + 2 * body.tol
     reach_a = reach_k + body.shin
     for k in free:
-        if np.linalg.norm(X[k] - s) > reach_k or X[k, 2] > s[2] - 0.2:
+        dk = float(np.linalg.norm(X[k] - s))
+        if dk > reach_k or X[k, 2] > s[2] - 0.2:
             continue
-        out.append((k, -1, 0.0))
+        # the knee hangs about a trunk (torso + thigh) below its shoulder: much nearer takes a
+        # deep crouch, or a wrist taken for the shoulder
+        near = min(2.0, _NEAR_W * max(0.0, _NEAR_F * body.trunk - dk))
+        out.append((k, -1, near))
         for a in free:
             if a == k or X[a, 2] > X[k, 2] + 0.1:
                 continue
             err = body.shin_error(X[k], X[a])
             if err <= body.tol and np.linalg.norm(X[a] - s) <= reach_a:
-                out.append((k, a, 0.3 * (err / body.tol) ** 2))
+                out.append((k, a, near + 0.3 * (err / body.tol) ** 2))
     for a in free:
         if np.linalg.norm(X[a] - s) <= reach_a and X[a, 2] < s[2] - 0.6:
             out.append((-1, a, 0.0))
@@ -101,14 +115,15 @@ def _knee_bend(X: np.ndarray, s: np.ndarray, k: int, a: int, f: np.ndarray) -> f
 
 
 def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = None,
-             shared: np.ndarray | None = None, max_points: int = 12, keep: int = 8) -> list[Hypothesis]:
+             shared: np.ndarray | None = None, max_points: int = 12, keep: int = 8,
+             legs_kept: int = 24) -> list[Hypothesis]:
     """Labellings of points X (M, 3) world metres, best first (at most ``keep``).
 
     trust: (M,) penalty in [0, 1] per point (0 = sure it is a marker, e.g. seen by >= 3
     views). shared: (M,) bool, points that may stand for both knees or both ankles (seen only
     in merged blobs): such a point named for one side with the other side unnamed is named
-    for both (the caller splits it). Needs both shoulders; returns [] when no pair of points
-    can be the shoulders.
+    for both (the caller splits it). legs_kept: leg labellings per shoulder pair completed
+    with wrists. Needs both shoulders; returns [] when no pair of points can be the shoulders.
     """
     shared = np.zeros(len(X), bool) if shared is None else np.asarray(shared, bool)
     hint = hint or Hint()
@@ -127,6 +142,7 @@ def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = N
                 continue
             r = np.array([f[1], -f[0]])  # the subject's right, horizontal
             base = 2.0 - 0.3 * (body.width_error(X[L], X[R]) / body.tol) ** 2 - trust[L] - trust[R]
+            base -= _TILT_W * max(0.0, abs(float(X[L, 2] - X[R, 2])) - _TILT_M)  # shoulders stay level
             if hint.facing is not None:
                 base -= hint.facing_weight * (1.0 - float(f @ hint.facing))
             if hint.velocity is not None and np.hypot(*hint.velocity[:2]) > 0.5:
@@ -145,12 +161,13 @@ def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = N
                     sc -= 2.0 * (_knee_bend(X, X[L], kl, al, f) + _knee_bend(X, X[R], kr, ar, f))
                     for a, b in ((kl, kr), (al, ar)):
                         if a >= 0 and b >= 0:
-                            sc -= 1.0 * max(0.0, -float((X[b] - X[a])[:2] @ r) - 0.05)
+                            sc -= _LATERAL_W * max(0.0, _LATERAL_M - float((X[b] - X[a])[:2] @ r))
                     kl, kr = _share(kl, kr, shared)
                     al, ar = _share(al, ar, shared)
+                    sc += (kl == kr >= 0) + (al == ar >= 0)  # a shared point names two markers
                     pairs.append((sc, kl, al, kr, ar))
             pairs.sort(key=lambda p: -p[0])
-            for sc, kl, al, kr, ar in pairs[:4]:
+            for sc, kl, al, kr, ar in pairs[:legs_kept]:
                 taken = {L, R, kl, al, kr, ar}
                 rest = [p for p in free if p not in taken]
                 wl = [-1] + [p for p in rest if np.linalg.norm(X[p] - X[L]) <= body.reach + body.tol]

@@ -55,6 +55,11 @@ class LabelConfig:
     merged_m: float = 0.02  #: a point seen in a merged blob costs this much more
     unexplained_m: float = 0.03  #: a 2-view point costs this much more per view that should have seen it
     merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it
+    recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
+    recover_margin_m: float = 0.10  #: ... when no other free point is within this much more
+    anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
+    max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast (plus 45 degrees) between labellings
+    crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
     track_timeout: float = 0.12  #: a marker unseen for longer is predicted from the skeleton
     skeleton_max_age: float = 0.4  #: the skeleton predicts markers up to this long after the last solved pose
     min_tracked: int = 3  #: fewer predictable markers: identify from the points
@@ -63,7 +68,7 @@ class LabelConfig:
     min_margin: float = 0.6  #: an identification this much better than the runner-up is taken at once
     max_wait: float = 0.2  #: else the best one is taken after this long
     facing_weight: float = 3.0  #: weight of the known facing when identifying ...
-    facing_decay: float = 3.0  #: ... decaying with this time constant since it was known
+    facing_decay: float = 1.0  #: ... decaying with this time constant since it was known
     first_facing_weight: float = 1.0  #: before any labelling: the standard pose faces +Y
     rigid_abs_tol: float = 0.05  #: rigid distances may differ by this ...
     rigid_rel_tol: float = 0.03  #: ... plus this fraction of half the body height
@@ -240,7 +245,7 @@ class Labeller:
                 continue  # a point of its own may be there: no sharing
             best = None
             for m in np.flatnonzero(assign >= 0):
-                if np.count_nonzero(assign == assign[m]) > 1 or not pts.merged[assign[m]]:
+                if np.count_nonzero(assign == assign[m]) > 1 or not _two_in_one(pts, assign[m]):
                     continue
                 sep = float(np.linalg.norm(pred[m] - pred[n]))
                 dn = float(np.linalg.norm(pts.X[assign[m]] - pred[n]))
@@ -254,6 +259,12 @@ class Labeller:
         right = None
         if self._facing is not None and t - self._t_facing <= 0.5:
             right = np.array([self._facing[1], -self._facing[0], 0.0])
+        if right is not None:
+            # legs do not cross: a right knee (ankle) well to the left of the left one is a swap
+            for lm, rm in ((LK, RK), (LA, RA)):
+                if assign[lm] >= 0 and assign[rm] >= 0 and assign[lm] != assign[rm] and \
+                        float((out[rm] - out[lm]) @ right) < -cfg.crossed_m:
+                    assign[[lm, rm]], arow[[lm, rm]], out[[lm, rm]] = assign[[rm, lm]], arow[[rm, lm]], out[[rm, lm]]
         _split_shared(out, assign, pred, cfg.merged_half_m, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
         # rigid distances and facing: drop the worse-predicted marker of a violating group
@@ -262,10 +273,17 @@ class Labeller:
             out[worst] = np.nan
             assign[worst] = arow[worst] = -1
         if assign[LS] >= 0 and assign[RS] >= 0 and self._facing is not None:
+            # the body turns at most ~2 turns/s: a facing far from the last one is a mislabel
             f = _facing(out[LS], out[RS])
-            if f is not None and float(f @ self._facing) < -0.3:
+            limit = math.cos(min(math.pi, math.radians(45.0) + cfg.max_turn_rate * (t - self._t_facing)))
+            if f is not None and float(f @ self._facing) < limit:
                 out[[LS, RS]] = np.nan
                 assign[[LS, RS]] = arow[[LS, RS]] = -1
+        # markers left out, or dropped above, found again from the free points
+        lost_before = assign < 0
+        self._recover(pts, pred, assign, arow, row_pt)
+        back = lost_before & (assign >= 0)
+        out[back] = pts.X[assign[back]]
         named = np.flatnonzero(assign >= 0)
         margin = float("nan")
         if named.size:
@@ -280,11 +298,90 @@ class Labeller:
         resid = float(np.sqrt(np.mean(d_eff[arow[named], named] ** 2))) if named.size else float("nan")
         return out, LabelQuality(int(named.size), P, margin, resid, "tracking", over)
 
+    def _recover(self, pts: Points3D, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
+                 row_pt: np.ndarray) -> None:
+        """Name markers left out by the gated assignment to points nobody took, when the choice
+        is clear: a marker whose prediction has drifted (its track lost, the skeleton wrong
+        about it) would otherwise never be found again.
+
+        A point that is surely a marker (>= 3 views, or no view missing it) is a candidate for a
+        marker within ``recover_gate_m`` of its prediction; it, or a 2-view point that one
+        other view misses, is a candidate where
+        the named markers put it: a shoulder a shoulder width from the other along the
+        subject's right, a knee a shin above its ankle, an ankle a shin below its knee. The
+        candidates are assigned optimally; a pair is kept when no other candidate point is
+        nearly as good and the marker's rigid distances hold. assign, arow (8,) in place."""
+        cfg = self.config
+        body = self._body
+        named = np.full((N_MARKERS, 3), np.nan)
+        named[assign >= 0] = pts.X[assign[assign >= 0]]
+        lost = np.flatnonzero(assign < 0)
+        free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
+        free = free[(pts.n_views[free] >= 3) | (pts.unexplained[free] <= 1)]
+        if not lost.size or not free.size:
+            return
+        X = pts.X[free]
+        # a 2-view point that a third view should have seen may be a ghost: placed by the
+        # rigid lengths only, at a higher cost
+        doubt = np.where((pts.n_views[free] < 3) & (pts.unexplained[free] > 0), cfg.unexplained_m, 0.0)
+        cost = np.full((len(free), len(lost)), np.inf)
+        right = None if self._facing is None else np.array([self._facing[1], -self._facing[0], 0.0])
+        for j, m in enumerate(lost):
+            if np.isfinite(pred[m]).all():
+                d = np.linalg.norm(X - pred[m], axis=1)
+                cost[:, j] = np.where((d <= cfg.recover_gate_m) & (doubt == 0), d, np.inf)
+            anchor = np.full(len(free), np.inf)
+            if m in (LS, RS) and right is not None:
+                other, sign = (RS, -1.0) if m == LS else (LS, 1.0)
+                if assign[other] >= 0:
+                    d = np.linalg.norm(X - (named[other] + sign * body.shoulder_width * right), axis=1)
+                    anchor = np.where(d <= 3 * body.tol, d, np.inf)
+            for knee, ankle in ((LK, LA), (RK, RA)):
+                if m == ankle and assign[knee] >= 0:
+                    e = np.abs(np.linalg.norm(X - named[knee], axis=1) - body.shin)
+                    anchor = np.where((e <= body.tol) & (X[:, 2] < named[knee][2]), e, np.inf)
+                elif m == knee and assign[ankle] >= 0:
+                    e = np.abs(np.linalg.norm(X - named[ankle], axis=1) - body.shin)
+                    anchor = np.where((e <= body.tol) & (X[:, 2] > named[ankle][2]), e, np.inf)
+            cost[:, j] = np.minimum(cost[:, j], cfg.anchor_m + anchor + doubt)
+        if not np.isfinite(cost).any():
+            return
+        # (points + markers) x (markers + points): a point may stay free at no cost, a marker
+        # stay unnamed at cost 1 (more than any candidate)
+        nf, nl = len(free), len(lost)
+        full = np.full((nf + nl, nl + nf), 1e3)
+        full[:nf, :nl] = np.where(np.isfinite(cost), cost, 1e3)
+        full[np.arange(nf), nl + np.arange(nf)] = 0.0
+        full[nf + np.arange(nl), np.arange(nl)] = 1.0
+        full[nf:, nl:] = 0.0
+
+        def total(c: np.ndarray) -> float:
+            r, k = linear_sum_assignment(c)
+            return float(c[r, k].sum())
+
+        best = total(full)
+        rows, cols = linear_sum_assignment(full)
+        for r, c in sorted(zip(rows, cols), key=lambda rc: full[rc]):
+            if r >= nf or c >= nl or not np.isfinite(cost[r, c]):
+                continue
+            m, p = lost[c], free[r]
+            alt = full.copy()
+            alt[r, c] = 1e3  # the best labelling without this pair must be clearly worse
+            if total(alt) - best < cfg.recover_margin_m:
+                continue
+            trial = named.copy()
+            trial[m] = pts.X[p]
+            if any(m in g for g in body.violations(trial)):
+                continue
+            named[m] = pts.X[p]
+            assign[m] = p
+            arow[m] = int(np.flatnonzero(row_pt == p)[0])
+
     def _identify(self, pts: Points3D, t: float) -> tuple[np.ndarray, LabelQuality] | None:
         cfg = self.config
         if len(pts) < cfg.min_points:
             return None
-        trust = np.where(pts.n_views >= 3, 0.0, np.minimum(0.6 * pts.unexplained, 1.5))
+        trust = np.where(pts.n_views >= 3, 0.0, np.minimum(0.9 * pts.unexplained, 2.0))
         hint = Hint()
         if self._facing is not None:
             hint.facing = self._facing
@@ -300,17 +397,26 @@ class Labeller:
             return None
         best = hyps[0]
         margin = best.score - hyps[1].score if len(hyps) > 1 else best.score
+        labels = best.labels.copy()
         if margin < cfg.min_margin:
-            if self._t_ambiguous is None:
-                self._t_ambiguous = t
-            if t - self._t_ambiguous < cfg.max_wait:
-                return None
+            # name at once what every close runner-up agrees on (e.g. all but an ankle pair
+            # whose order is unclear); the rest waits for the tracking and the skeleton
+            close = [h for h in hyps[1:] if best.score - h.score < cfg.min_margin]
+            labels[_disputed(best.labels, close)] = -1
+            if (labels[[LS, RS]] < 0).any() or np.count_nonzero(labels >= 0) < cfg.min_points:
+                if self._t_ambiguous is None:
+                    self._t_ambiguous = t
+                if t - self._t_ambiguous < cfg.max_wait:
+                    return None
+                labels = best.labels.copy()
         self._t_ambiguous = None
+        rivals = [h.score for h in hyps[1:] if (_disputed(labels, [h]) & (labels >= 0)).any()]
+        margin = best.score - max(rivals) if rivals else best.score
         out = np.full((N_MARKERS, 3), np.nan)
-        named = best.labels >= 0
-        out[named] = pts.X[best.labels[named]]
+        named = labels >= 0
+        out[named] = pts.X[labels[named]]
         right = np.array([best.facing[1], -best.facing[0], 0.0])
-        _split_shared(out, best.labels, np.zeros((N_MARKERS, 3)), cfg.merged_half_m, right)
+        _split_shared(out, labels, np.zeros((N_MARKERS, 3)), cfg.merged_half_m, right)
         self.stats.identifications += 1
         if self.stats.first_identified_t is None:
             self.stats.first_identified_t = t
@@ -375,6 +481,26 @@ def _split_shared(out: np.ndarray, assign: np.ndarray, pred: np.ndarray, half: f
 
 
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
+
+
+def _disputed(labels: np.ndarray, rivals: list) -> np.ndarray:
+    """(8,) bool: markers whose point (labels (8,), -1 = unnamed) some rival labelling names
+    differently: it gives the marker another point, or gives the point to another marker.
+    A rival that leaves a marker unnamed does not dispute it."""
+    out = np.zeros(N_MARKERS, bool)
+    for h in rivals:
+        other = h.labels
+        out |= (other >= 0) & (other != labels)
+        for m in np.flatnonzero(labels >= 0):
+            if any(other[n] == labels[m] and labels[n] != labels[m] for n in range(N_MARKERS)):
+                out[m] = True
+    return out
+
+
+def _two_in_one(pts: Points3D, p: int) -> bool:
+    """Point p may hold two markers: its blobs are double-sized everywhere, or merged in all
+    its views but at most one."""
+    return bool(pts.merged_all[p]) or (pts.n_merged[p] >= 2 and pts.n_merged[p] >= pts.n_views[p] - 1)
 
 
 def _facing(left: np.ndarray, right: np.ndarray) -> np.ndarray | None:

@@ -62,7 +62,8 @@ class Points3D:
     the point's blob as each marker (the motes' hints); merged: (P,) some view saw it in a
     merged blob; merged_all: (P,) the point's blobs are about twice the size of a single
     marker's at that distance in every view (median over views of area x depth^2, against the
-    frame's typical point), so it is likely the midpoint of two markers no view separates.
+    frame's typical point), so it is likely the midpoint of two markers no view separates;
+    n_merged: (P,) views that saw it in a merged blob.
     """
 
     X: np.ndarray
@@ -73,6 +74,7 @@ class Points3D:
     votes: np.ndarray
     merged: np.ndarray
     merged_all: np.ndarray
+    n_merged: np.ndarray
 
     def __len__(self) -> int:
         return len(self.X)
@@ -81,7 +83,7 @@ class Points3D:
     def empty(n_cameras: int) -> "Points3D":
         return Points3D(np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64),
                         np.zeros((n_cameras, 0), np.int64), np.zeros((0, 8), np.int64), np.zeros(0, bool),
-                        np.zeros(0, bool))
+                        np.zeros(0, bool), np.zeros(0, np.int64))
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -196,8 +198,14 @@ class PointReconstructor:
                 continue
             seen.add(sig)
             cs = np.flatnonzero(blob[:, k] >= 0)
-            if any(cap[c][blob[c, k]] <= 0 for c in cs):
-                continue
+            taken = [c for c in cs if cap[c][blob[c, k]] <= 0]
+            if taken:
+                # a hidden marker projects onto the blob of the marker in front of it: the
+                # view is explained, but its blob is the other point's. Keep the point from
+                # its own views when >= 2 are left.
+                if len(cs) - len(taken) < 2 or not self._reduce(k, taken, X, err, n_views, blob, uv):
+                    continue
+                cs = np.flatnonzero(blob[:, k] >= 0)
             if keep and np.min(np.linalg.norm(X[keep] - X[k], axis=1)) < cfg.min_separation_m:
                 continue
             for c in cs:
@@ -208,9 +216,10 @@ class PointReconstructor:
         if not keep:
             return Points3D.empty(C)
         idx = np.array(keep)
+        self._unshare(idx, X, err, n_views, blob, uv)
         blob = blob[:, idx]
         votes = np.zeros((len(idx), 8), np.int64)
-        merged = np.zeros(len(idx), bool)
+        n_merged = np.zeros(len(idx), np.int64)
         size = np.full((C, len(idx)), np.nan)  # blob area x (depth / f)^2: m^2, the marker's apparent size
         for c in range(C):
             has = blob[c] >= 0
@@ -220,7 +229,7 @@ class PointReconstructor:
             rows = np.flatnonzero(has)
             lab = hint >= 0
             np.add.at(votes, (rows[lab], hint[lab]), 1)
-            merged[rows] |= views[c].capacity[blob[c, has]] > 1
+            n_merged[rows] += views[c].capacity[blob[c, has]] > 1
             depth = self.rig.cameras[c].to_camera(X[idx[rows]])[:, 2]
             size[c, rows] = np.pi * views[c].radius[blob[c, has]] ** 2 * (depth / self.f[c]) ** 2
         merged_all = np.zeros(len(idx), bool)
@@ -229,7 +238,40 @@ class PointReconstructor:
             med = np.nanmedian(size, axis=0)
             merged_all = med >= cfg.double_size_ratio * float(np.nanpercentile(med[solid], 40))
         return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing[idx].astype(np.int64), blob,
-                        votes, merged, merged_all)
+                        votes, n_merged > 0, merged_all, n_merged)
+
+    def _unshare(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
+                 uv: np.ndarray) -> None:
+        """A blob used by two accepted points seen in >= 3 views each is two markers merged: its
+        centroid lies between them and would pull both towards each other. Such points are
+        triangulated again without it (the blob stays theirs for the naming stage)."""
+        for c in range(self.C):
+            b = blob[c, idx]
+            vals, counts = np.unique(b[b >= 0], return_counts=True)
+            for v in vals[counts > 1]:
+                sure = [k for k in idx[b == v] if n_views[k] >= 3]
+                if len(sure) < 2:
+                    continue  # shared with a 2-view point, which may be a ghost: keep the view
+                for k in sure:
+                    if n_views[k] >= 3:
+                        keep_blob = blob[:, k].copy()
+                        if self._reduce(int(k), [c], X, err, n_views, blob, uv):
+                            blob[:, k] = keep_blob
+
+    def _reduce(self, k: int, drop: list[int], X: np.ndarray, err: np.ndarray, n_views: np.ndarray,
+                blob: np.ndarray, uv: np.ndarray) -> bool:
+        """Triangulate candidate k again without the views ``drop``; update X, err, n_views and
+        blob in place. False when the rest does not make a point (too few views, too large an error)."""
+        sub = uv[:, k:k + 1].copy()
+        sub[drop] = np.nan
+        sub[blob[:, k] < 0] = np.nan
+        res = self.tri.triangulate(sub)
+        if res.n_views[0] < 2 or not self._plausible(res.points)[0]:
+            return False
+        X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
+        blob[drop, k] = -1
+        blob[~res.used[:, 0], k] = -1
+        return True
 
     def _plausible(self, X: np.ndarray) -> np.ndarray:
         cfg = self.config

@@ -212,6 +212,73 @@ def body_joints(dirs, lengths, out):
         out[RA, c] = out[RK, c] + lengths[7] * dirs[RSH, c]
 
 
+# marker model (samba_common.markerset): side, segment (0 torso, 1 forearm, 2 shank), limb bones
+M_SIDE = np.array([1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0])
+M_SEG = np.array([0, 0, 1, 1, 2, 2, 2, 2])
+M_UPPER = np.array([-1, -1, LUA, RUA, LTH, RTH, LTH, RTH])
+M_LOWER = np.array([-1, -1, LFA, RFA, LSH, RSH, LSH, RSH])
+HINGE_BLEND = 0.2
+
+
+@njit(cache=True, fastmath=FAST)
+def marker_offsets_body(dirs, offsets, w):
+    """Offsets of the 8 markers in torso coordinates, w (8, 3), from directions (11, 3) and the
+    offsets (8, 3) in segment frames (samba_common.markerset.segment_frames_body, same definition)."""
+    for i in range(8):
+        s = M_SIDE[i]
+        a0, a1, a2 = offsets[i, 0], offsets[i, 1], offsets[i, 2]
+        if a0 == 0.0 and a1 == 0.0 and a2 == 0.0:
+            w[i, 0], w[i, 1], w[i, 2] = 0.0, 0.0, 0.0
+            continue
+        if M_SEG[i] == 0:
+            w[i, 0], w[i, 1], w[i, 2] = s * a0, a1, a2
+            continue
+        u, lo = M_UPPER[i], M_LOWER[i]
+        k = HINGE_BLEND if M_SEG[i] == 1 else -HINGE_BLEND
+        l0, l1, l2 = dirs[lo, 0], dirs[lo, 1], dirs[lo, 2]
+        v0, v1, v2 = l0, l1, l2 + k
+        h0 = dirs[u, 1] * v2 - dirs[u, 2] * v1
+        h1 = dirs[u, 2] * v0 - dirs[u, 0] * v2
+        h2 = dirs[u, 0] * v1 - dirs[u, 1] * v0
+        p0, p1, p2 = -l0, -l1, -l2
+        dot = h0 * p0 + h1 * p1 + h2 * p2
+        h0, h1, h2 = h0 - dot * p0, h1 - dot * p1, h2 - dot * p2
+        if h0 * h0 + h1 * h1 + h2 * h2 < 1e-18:
+            dot = p0
+            h0, h1, h2 = 1.0 - dot * p0, -dot * p1, -dot * p2
+        h0, h1, h2 = _unit3(h0, h1, h2)
+        sg = -s if M_SEG[i] == 1 else s
+        e10, e11, e12 = sg * h0, sg * h1, sg * h2
+        e30 = s * (e11 * p2 - e12 * p1)
+        e31 = s * (e12 * p0 - e10 * p2)
+        e32 = s * (e10 * p1 - e11 * p0)
+        w[i, 0] = a0 * e10 + a1 * p0 + a2 * e30
+        w[i, 1] = a0 * e11 + a1 * p1 + a2 * e31
+        w[i, 2] = a0 * e12 + a1 * p2 + a2 * e32
+
+
+@njit(cache=True, fastmath=FAST)
+def body_markers(dirs, lengths, offsets, body, mb, w):
+    """Torso-frame markers mb (8, 3) = joint centres + offsets; fills body (13, 3) joints and w (8, 3)."""
+    body_joints(dirs, lengths, body)
+    marker_offsets_body(dirs, offsets, w)
+    for i in range(8):
+        for c in range(3):
+            mb[i, c] = body[MARKER_JOINTS[i], c] + w[i, c]
+
+
+@njit(cache=True, fastmath=FAST)
+def world_markers(R, o, dirs, lengths, offsets, out):
+    """World markers out (8, 3) of a state (R, o, dirs)."""
+    body = np.empty((13, 3))
+    mb = np.empty((8, 3))
+    w = np.empty((8, 3))
+    body_markers(dirs, lengths, offsets, body, mb, w)
+    for i in range(8):
+        for c in range(3):
+            out[i, c] = o[c] + R[c, 0] * mb[i, 0] + R[c, 1] * mb[i, 1] + R[c, 2] * mb[i, 2]
+
+
 @njit(cache=True, fastmath=FAST)
 def marker_axes(m):
     """Marker body frame (3, 3) (columns x, y, z) of 8 markers (8, 3) in any coordinates:
@@ -243,20 +310,19 @@ def marker_axes(m):
 
 
 @njit(cache=True, fastmath=FAST)
-def pose_vectors(pool, lengths, X, frame=True):
+def pose_vectors(pool, lengths, offsets, X, frame=True):
     """X[:, :39]: vec(dirs) and (when ``frame``) the torso y, z axes in each pose's marker body
     frame, for pool poses (P, 11, 3); X is (P, 42), its last 3 columns are filled by the caller."""
     body = np.empty((13, 3))
     m = np.empty((8, 3))
+    w = np.empty((8, 3))
     for p in range(pool.shape[0]):
         for b in range(11):
             for c in range(3):
                 X[p, 3 * b + c] = pool[p, b, c]
         if not frame:
             continue
-        body_joints(pool[p], lengths, body)
-        for i in range(8):
-            m[i] = body[MARKER_JOINTS[i]]
+        body_markers(pool[p], lengths, offsets, body, m, w)
         y0, y1, y2, z0, z1, z2 = _frame_rows(m)
         X[p, 33], X[p, 34], X[p, 35] = y0, y1, y2
         X[p, 36], X[p, 37], X[p, 38] = z0, z1, z2
@@ -312,7 +378,7 @@ def gaussian_block(X, dims, floor2, weight, mu, W):
 
 
 @njit(cache=True, fastmath=FAST)
-def linear_start(pool, lengths, obs_torso, seen):
+def linear_start(pool, lengths, offsets, obs_torso, seen):
     """The thesis' start: directions (11, 3) blending the pool so its markers best match the
     observed markers ``obs_torso`` (8, 3) (torso coordinates of the reference pose; rows where
     ``seen`` is False are ignored) in the ridge-regularised least-squares sense."""
@@ -324,13 +390,15 @@ def linear_start(pool, lengths, obs_torso, seen):
     A = np.empty((3 * n_seen, P))
     b = np.empty(3 * n_seen)
     body = np.empty((13, 3))
+    mb = np.empty((8, 3))
+    w = np.empty((8, 3))
     for p in range(P):
-        body_joints(pool[p], lengths, body)
+        body_markers(pool[p], lengths, offsets, body, mb, w)
         r = 0
         for i in range(8):
             if seen[i]:
                 for c in range(3):
-                    A[r, p] = body[MARKER_JOINTS[i], c]
+                    A[r, p] = mb[i, c]
                     r += 1
     r = 0
     for i in range(8):
@@ -394,8 +462,10 @@ def _world(R, o, dirs, lengths, q):
 
 
 @njit(cache=True, fastmath=FAST)
-def _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r):
+def _residuals(R, o, dirs, lengths, offsets, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r):
     _world(R, o, dirs, lengths, q)
+    w = np.empty((8, 3))
+    marker_offsets_body(dirs, offsets, w)
     v = np.empty(42)
     for b in range(11):
         for c in range(3):
@@ -410,7 +480,8 @@ def _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, targe
     for i in range(8):
         if seen[i]:
             for c in range(3):
-                r[k] = (q[MARKER_JOINTS[i], c] - obs[i, c]) / sigma_m
+                m = q[MARKER_JOINTS[i], c] + R[c, 0] * w[i, 0] + R[c, 1] * w[i, 1] + R[c, 2] * w[i, 2]
+                r[k] = (m - obs[i, c]) / sigma_m
                 k += 1
     if smooth:
         for j in range(13):
@@ -424,10 +495,14 @@ def _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, targe
 
 
 @njit(cache=True, fastmath=FAST)
-def _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm, Jq, body):
+def _jacobian(R, dirs, lengths, offsets, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm, Jq, body):
     """Fill Jm (n_res, 27) with the Jacobian of :func:`_residuals`; Jq (13, 3, 27) and body
-    (13, 3) are work arrays."""
+    (13, 3) are work arrays. A marker offset turns with its segment: with the torso exactly, with
+    its lower limb bone as that bone's direction turns (the small change of the hinge axis is
+    left out; the step is accepted on the exact energy)."""
     body_joints(dirs, lengths, body)
+    w = np.empty((8, 3))
+    marker_offsets_body(dirs, offsets, w)
     Jq[:] = 0.0
     for j in range(13):
         b0, b1, b2 = body[j, 0], body[j, 1], body[j, 2]
@@ -467,12 +542,35 @@ def _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm
         Jm[r, 2] = -(wy0 * M[0, 0] + wy1 * M[1, 0] + wy2 * M[2, 0]) + wu0 * u1 - wu1 * u0
     k = 42
     inv_m = 1.0 / sigma_m
+    extra = np.zeros((3, 27))
     for i in range(8):
         if seen[i]:
             j = MARKER_JOINTS[i]
+            w0, w1, w2 = w[i, 0], w[i, 1], w[i, 2]
+            has_w = w0 != 0.0 or w1 != 0.0 or w2 != 0.0
+            if has_w:
+                extra[:] = 0.0
+                for c in range(3):  # rotation: R (e_k x w)
+                    extra[c, 0] = -R[c, 1] * w2 + R[c, 2] * w1
+                    extra[c, 1] = R[c, 0] * w2 - R[c, 2] * w0
+                    extra[c, 2] = -R[c, 0] * w1 + R[c, 1] * w0
+                lo = M_LOWER[i]
+                if lo >= 0:
+                    d0, d1, d2 = dirs[lo, 0], dirs[lo, 1], dirs[lo, 2]
+                    for kk in range(2):
+                        col = param_col(lo, kk)
+                        t0, t1, t2 = T[lo, kk, 0], T[lo, kk, 1], T[lo, kk, 2]
+                        a0, a1, a2 = d1 * t2 - d2 * t1, d2 * t0 - d0 * t2, d0 * t1 - d1 * t0  # axis d x t
+                        b0, b1, b2 = a1 * w2 - a2 * w1, a2 * w0 - a0 * w2, a0 * w1 - a1 * w0  # (d x t) x w
+                        for c in range(3):
+                            extra[c, col] += R[c, 0] * b0 + R[c, 1] * b1 + R[c, 2] * b2
             for c in range(3):
-                for col in range(27):
-                    Jm[k, col] = Jq[j, c, col] * inv_m
+                if has_w:
+                    for col in range(27):
+                        Jm[k, col] = (Jq[j, c, col] + extra[c, col]) * inv_m
+                else:
+                    for col in range(27):
+                        Jm[k, col] = Jq[j, c, col] * inv_m
                 k += 1
     if smooth:
         inv_s = 1.0 / sigma_s
@@ -571,7 +669,7 @@ def _chol_solve(M, rhs, out):
 
 
 @njit(cache=True, fastmath=FAST)
-def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, Gm, max_iter, tol):
+def lm_solve(R, o, dirs, lengths, offsets, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, Gm, max_iter, tol):
     """Levenberg-Marquardt from (R, o, dirs). Returns (R, o, dirs, q (13, 3), iterations, cost)."""
     n_seen = 0
     for i in range(8):
@@ -588,13 +686,13 @@ def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
     delta = np.empty(27)
     Ad = np.empty((27, 27))
     mg = np.empty(27)
-    cost = _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
+    cost = _residuals(R, o, dirs, lengths, offsets, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
     lam = 1e-3
     it = 0
     while it < max_iter:
         it += 1
         T = _tangents(dirs)
-        _jacobian(R, dirs, lengths, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm, Jq, body)
+        _jacobian(R, dirs, lengths, offsets, W, RA, seen, sigma_m, smooth, sigma_s, Gm, T, Jm, Jq, body)
         A = np.dot(Jm.T, Jm)
         g = np.dot(Jm.T, r)
         accepted = False
@@ -608,7 +706,8 @@ def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
                 lam *= 10.0
                 continue
             R2, o2, d2 = _step(R, o, dirs, delta, T)
-            cost_new = _residuals(R2, o2, d2, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q_new, r_new)
+            cost_new = _residuals(R2, o2, d2, lengths, offsets, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s,
+                                  q_new, r_new)
             if cost_new <= cost:
                 accepted = True
                 break
@@ -627,7 +726,7 @@ def lm_solve(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
 
 
 @njit(cache=True, fastmath=FAST)
-def energy(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s):
+def energy(R, o, dirs, lengths, offsets, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s):
     """The energy of one state (for choosing between starts)."""
     n_seen = 0
     for i in range(8):
@@ -635,11 +734,11 @@ def energy(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, s
             n_seen += 1
     r = np.empty(42 + 3 * n_seen + (39 if smooth else 0))
     q = np.empty((13, 3))
-    return _residuals(R, o, dirs, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
+    return _residuals(R, o, dirs, lengths, offsets, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s, q, r)
 
 
 @njit(cache=True, fastmath=FAST)
-def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, R_nn, RA, origin,
+def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, offsets, floor2, weight, R_nn, RA, origin,
                 obs, seen, sigma_m, smooth, target, sigma_s, has_prev, R0, o0, d0, Gm, max_iter, tol):
     """One frame after the neighbour search, in one compiled call.
 
@@ -666,7 +765,7 @@ def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor
             pseudo_pool(db_dirs, nbrs[part], cos_a, sin_a, pools[part], True, 2, 4)
         else:
             pseudo_pool(db_dirs, nbrs[part], cos_a, sin_a, pools[part], True, 0, 4)
-        pose_vectors(pools[part], lengths, X, not arm)
+        pose_vectors(pools[part], lengths, offsets, X, not arm)
         for p in range(n_pool):  # pseudo-poses keep their neighbour's orientation to gravity
             for c in range(3):
                 X[p, 39 + c] = db_up[nbrs[part, p // (N + 1)], c]
@@ -688,14 +787,19 @@ def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor
                 obs_torso[i, c] = ((obs[i, 0] - origin[0]) * M[0, c] + (obs[i, 1] - origin[1]) * M[1, c]
                                    + (obs[i, 2] - origin[2]) * M[2, c])
     Rs = M
-    ds = linear_start(pool, lengths, obs_torso, seen)
+    ds = linear_start(pool, lengths, offsets, obs_torso, seen)
     os_ = origin.copy()
+    # the shoulder markers' midpoint sits at the mean shoulder offset from the joints' midpoint
+    w_sh = np.array([0.5 * (offsets[0, 0] - offsets[1, 0]), 0.5 * (offsets[0, 1] + offsets[1, 1]),
+                     0.5 * (offsets[0, 2] + offsets[1, 2])])
+    for c in range(3):
+        os_[c] -= M[c, 0] * w_sh[0] + M[c, 1] * w_sh[1] + M[c, 2] * w_sh[2]
     if has_prev:
-        e_lin = energy(Rs, os_, ds, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s)
-        e_prev = energy(R0, o0, d0, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s)
+        e_lin = energy(Rs, os_, ds, lengths, offsets, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s)
+        e_prev = energy(R0, o0, d0, lengths, offsets, mu, W, RA, obs, seen, sigma_m, smooth, target, sigma_s)
         if e_prev < e_lin:
             Rs, os_, ds = R0.copy(), o0.copy(), d0.copy()
-    R, o, d, q, it, _cost = lm_solve(Rs, os_, ds, lengths, mu, W, RA, obs, seen, sigma_m, smooth, target,
+    R, o, d, q, it, _cost = lm_solve(Rs, os_, ds, lengths, offsets, mu, W, RA, obs, seen, sigma_m, smooth, target,
                                      sigma_s, Gm, max_iter, tol)
     return R, o, d, q, it
 
@@ -724,21 +828,24 @@ def _partial_knn(features, cols, n_cols, feature, k):
 
 
 @njit(cache=True, fastmath=FAST)
-def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, features, feat_cols, n_cols,
-          up_weight, R_A_db, db_dirs, db_up, k, dims, n_dims, cos_a, sin_a, lengths, floor2, weight, sigma_m, accel, smooth_floor,
+def frame(markers, has_pred, n_hist, q1, q2, m1, m2, has_state, R0, o0, d0, dt, trees, features, feat_cols, n_cols,
+          up_weight, R_A_db, db_dirs, db_up, k, dims, n_dims, cos_a, sin_a, lengths, offsets, floor2, weight, sigma_m, accel,
+          smooth_floor,
           min_markers,
           Gm, max_iter, tol):
     """The whole per-frame solve in one compiled call.
 
     markers: (8, 3) world metres, NaN rows unseen. History: n_hist (0-2) previous poses q1 (last),
-    q2 (13, 3); has_pred: whether they are recent enough to predict from; has_state/R0/o0/d0: the
+    q2 (13, 3), and their model markers m1, m2 (8, 3) (which fill unseen markers); has_pred: whether they are recent enough to predict from; has_state/R0/o0/d0: the
     last solved state; dt: seconds since the last pose. trees: per body part, the KD-tree arrays
     (see :mod:`samba_server.recon.kdtree`) over ``features`` (M, 27) columns feat_cols[p, :n_cols[p]]
     (24 aligned marker coordinates, then world up in the marker frame times ``up_weight``).
-    Returns (status, q (13, 3), R, o, dirs, iterations, rms marker residual, markers seen) with
-    status 0 = solved, 1 = bridged (too few markers, temporal model), 2 = unsolved.
+    offsets: (8, 3) marker offsets in segment frames (zeros: markers on the joint centres).
+    Returns (status, q (13, 3), R, o, dirs, iterations, rms marker residual, markers seen, model
+    markers (8, 3)) with status 0 = solved, 1 = bridged (too few markers, temporal model), 2 = unsolved.
     """
     q = np.full((13, 3), np.nan)
+    mk = np.full((8, 3), np.nan)
     seen = np.zeros(8, dtype=np.bool_)
     n_seen = 0
     for i in range(8):
@@ -747,21 +854,20 @@ def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, f
             n_seen += 1
     bridged = n_seen < min_markers
     if bridged and not has_pred:
-        return 2, q, R0, o0, d0, 0, np.nan, n_seen
+        return 2, q, R0, o0, d0, 0, np.nan, n_seen, mk
     filled = markers.copy()
     obs = np.zeros((8, 3))
     for i in range(8):
         if seen[i]:
             obs[i] = markers[i]
         elif has_pred:
-            j = MARKER_JOINTS[i]
             for c in range(3):
-                filled[i, c] = q1[j, c] if n_hist == 1 else 2.0 * q1[j, c] - q2[j, c]
+                filled[i, c] = m1[i, c] if n_hist == 1 else 2.0 * m1[i, c] - m2[i, c]
     for c in range(3):
         if not (np.isfinite(filled[0, c]) and np.isfinite(filled[1, c])):
-            return 2, q, R0, o0, d0, 0, np.nan, n_seen
+            return 2, q, R0, o0, d0, 0, np.nan, n_seen, mk
     if filled[0, 0] == filled[1, 0] and filled[0, 1] == filled[1, 1] and filled[0, 2] == filled[1, 2]:
-        return 2, q, R0, o0, d0, 0, np.nan, n_seen
+        return 2, q, R0, o0, d0, 0, np.nan, n_seen, mk
     RA = marker_axes(filled)
     origin = 0.5 * (filled[0] + filled[1])
     feature = np.empty(27)
@@ -793,14 +899,15 @@ def frame(markers, has_pred, n_hist, q1, q2, has_state, R0, o0, d0, dt, trees, f
     if has_state and n_hist == 2:  # the shoulder midpoint moves on at constant velocity
         o_start += 0.5 * (q1[LS] + q1[RS] - q2[LS] - q2[RS])
     sigma_s = math.sqrt((accel * dt * dt) ** 2 + smooth_floor ** 2)
-    R, o, d, q, it = solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, floor2, weight,
+    R, o, d, q, it = solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, offsets, floor2, weight,
                                  R_A_db[nbrs[P - 1, 0]], RA, origin, obs, seen, sigma_m, smooth, target, sigma_s,
                                  has_state and has_pred, R0, o_start, d0, Gm, max_iter, tol)
+    world_markers(R, o, d, lengths, offsets, mk)
     acc = 0.0
     for i in range(8):
         if seen[i]:
             for c in range(3):
-                e = q[MARKER_JOINTS[i], c] - markers[i, c]
+                e = mk[i, c] - markers[i, c]
                 acc += e * e
     resid = math.sqrt(acc / n_seen) if n_seen else np.nan
-    return (1 if bridged else 0), q, R, o, d, it, resid, n_seen
+    return (1 if bridged else 0), q, R, o, d, it, resid, n_seen, mk

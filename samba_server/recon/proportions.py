@@ -62,13 +62,40 @@ def standard_pose_frames(markers: np.ndarray, arm: float) -> np.ndarray:
     return ok
 
 
-def estimate_lengths(markers: np.ndarray, db_lengths: np.ndarray, straight_percentile: float = 97.0) -> np.ndarray:
+def approximate_centres(markers: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """Markers (F, 8, 3) moved to approximate joint centres by removing ``offsets`` (8, 3)
+    (samba_common.markerset frames) as if the subject stood upright in the standard pose: lateral
+    along the shoulder line, up along world Z, forward = shoulder line x Z; the wrists' dorsal
+    axis is up. Exact in the standard pose; a start for the whole-take fit otherwise."""
+    m = np.array(markers, dtype=float)
+    x = m[:, M["left_shoulder"]] - m[:, M["right_shoulder"]]
+    x[:, 2] = 0.0
+    n = np.linalg.norm(x, axis=-1, keepdims=True)
+    x = np.where(n > 1e-9, x / np.where(n > 1e-9, n, 1.0), np.array([-1.0, 0.0, 0.0]))  # facing +Y: left = -X
+    z = np.broadcast_to(np.array([0.0, 0.0, 1.0]), x.shape)
+    fwd = np.cross(x, z)
+    for i in range(8):
+        s = 1.0 if i % 2 == 0 else -1.0
+        a = np.asarray(offsets[i], dtype=float)
+        if i in (M["left_wrist"], M["right_wrist"]):  # e1 dorsal = up, e2 proximal = towards the body
+            w = a[0] * z - a[1] * s * x + a[2] * fwd
+        else:  # e1 lateral, e2 up, e3 forward
+            w = a[0] * s * x + a[1] * z + a[2] * fwd
+        m[:, i] -= w
+    return m
+
+
+def estimate_lengths(markers: np.ndarray, db_lengths: np.ndarray, offsets: np.ndarray | None = None,
+                     straight_percentile: float = 97.0) -> np.ndarray:
     """Bone lengths (8,) metres of the subject in ``markers`` (F, 8, 3) (NaN = missing).
 
-    db_lengths: (8,) the database body's lengths, used as the proportion prior.
+    db_lengths: (8,) the database body's lengths, used as the proportion prior. offsets: (8, 3)
+    marker offsets (samba_common.markerset), removed first by :func:`approximate_centres`.
     Raises ProportionError when shoulders, shins or arms are never seen.
     """
     db = np.asarray(db_lengths, dtype=float)
+    if offsets is not None and np.any(offsets):
+        markers = approximate_centres(markers, offsets)
     sw = _robust(_dist(markers, "left_shoulder", "right_shoulder"))
     shin = _robust(np.concatenate([_dist(markers, "left_knee", "left_ankle"), _dist(markers, "right_knee", "right_ankle")]))
     arm = _robust(np.concatenate([_dist(markers, "left_shoulder", "left_wrist"),

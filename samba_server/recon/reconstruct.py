@@ -28,8 +28,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from samba_common.align import batch_frames
-from samba_common.body import fk, fk_body, standard_pose
-from samba_common.skeleton import BONE_TYPES, MARKER_JOINT, N_JOINTS, N_MARKERS
+from samba_common.body import fk, standard_pose
+from samba_common.markerset import body_markers, markers_from_joints
+from samba_common.skeleton import BONE_TYPES, N_JOINTS, N_MARKERS
 
 from .db import MotionDB, load_default_db
 from .proportions import ProportionError, estimate_lengths
@@ -105,9 +106,8 @@ class PoseIndex:
     One tree over the whole feature and one per body part (:data:`PART_FEATURES`).
     """
 
-    def __init__(self, db: MotionDB, lengths: np.ndarray):
-        body = fk_body(db.dirs.astype(float), lengths)
-        markers = body[:, list(MARKER_JOINT)]
+    def __init__(self, db: MotionDB, lengths: np.ndarray, offsets: np.ndarray | None = None):
+        markers = body_markers(db.dirs.astype(float), lengths, offsets)
         origin, R_A = batch_frames(markers)
         aligned = np.einsum("fpi,fij->fpj", markers - origin[:, None], R_A).reshape(len(db), -1)
         up = np.einsum("fij,fi->fj", R_A, db.up.astype(float))  # world up in the marker frame
@@ -138,6 +138,8 @@ class _History:
     n: int = 0                                   # poses in q1/q2 (0-2)
     q1: np.ndarray = field(default_factory=lambda: np.zeros((N_JOINTS, 3)))  # last pose
     q2: np.ndarray = field(default_factory=lambda: np.zeros((N_JOINTS, 3)))  # the one before
+    m1: np.ndarray = field(default_factory=lambda: np.zeros((N_MARKERS, 3)))  # model markers of q1
+    m2: np.ndarray = field(default_factory=lambda: np.zeros((N_MARKERS, 3)))  # and of q2
     has_state: bool = False
     R: np.ndarray = field(default_factory=lambda: np.eye(3))
     o: np.ndarray = field(default_factory=lambda: np.zeros(3))
@@ -151,10 +153,14 @@ class Reconstructor:
 
     db: motion database (default: the shipped one); lengths: (8,) subject bone lengths in
     BONE_TYPES order, or None to estimate them from the first ``config.body_frames`` frames.
+    offsets: (8, 3) marker offsets in their segment frames (samba_common.markerset), metres;
+    None = markers on the joint centres. With ``lengths`` None and offsets given, the live body
+    estimate removes the offsets first (the subject's offsets, or the typical ones).
+    The joints solved are always joint centres; :meth:`markers_of` gives the model markers.
     """
 
     def __init__(self, db: MotionDB | None = None, config: ReconstructConfig | None = None,
-                 lengths: np.ndarray | None = None):
+                 lengths: np.ndarray | None = None, offsets: np.ndarray | None = None):
         self.db = db if db is not None else load_default_db()
         self.config = config or ReconstructConfig()
         cfg = self.config
@@ -170,6 +176,9 @@ class Reconstructor:
         self._body_buffer: list[np.ndarray] = []
         self._pending_body: tuple | None = None
         self.lengths: np.ndarray | None = None
+        self.offsets = np.zeros((N_MARKERS, 3)) if offsets is None else np.array(offsets, dtype=float).reshape(N_MARKERS, 3)
+        if not np.all(np.isfinite(self.offsets)):
+            raise ValueError("marker offsets must be finite")
         self.index: PoseIndex | None = None
         self._hist = _History()
         if lengths is not None:
@@ -185,7 +194,7 @@ class Reconstructor:
 
     def _build_index(self, lengths: np.ndarray) -> tuple[np.ndarray, PoseIndex, tuple]:
         """The database re-posed with ``lengths`` and its KD-trees (lengths, index, tree arrays)."""
-        index = PoseIndex(self.db, lengths)
+        index = PoseIndex(self.db, lengths, self.offsets)
         trees = tuple(index.tree(c).arrays() for c in (PART_FEATURES if self.config.parts else WHOLE[:1]))
         return lengths, index, trees
 
@@ -193,10 +202,18 @@ class Reconstructor:
         """Compile the solver now rather than on the first live frame (the very first run on a
         machine compiles for about a minute; later runs load the compiled code from disk)."""
         lengths = self.lengths if self.lengths is not None else self.db.mean_lengths
-        probe = Reconstructor(self.db, self.config, lengths)
-        markers = standard_pose(lengths)[list(MARKER_JOINT)]
+        probe = Reconstructor(self.db, self.config, lengths, self.offsets)
+        markers = markers_from_joints(standard_pose(lengths)[None], self.offsets)[0]
         for i in range(3):
             probe.solve(markers, i / 30.0)
+
+    def markers_of(self, joints: np.ndarray) -> np.ndarray:
+        """Model markers (8, 3) (or (F, 8, 3)) of solved joints (13, 3) / (F, 13, 3): the joint
+        centres plus this subject's offsets (what the labelling should predict)."""
+        j = np.asarray(joints, dtype=float)
+        single = j.ndim == 2
+        m = markers_from_joints(j[None] if single else j, self.offsets)
+        return m[0] if single else m
 
     def reset(self) -> None:
         """Forget the temporal history (a new take or a long gap); keeps the body."""
@@ -222,13 +239,13 @@ class Reconstructor:
         n = len(self._body_buffer)
         if self.lengths is None:
             try:
-                self.set_lengths(estimate_lengths(np.array(self._body_buffer), self.db.mean_lengths))
+                self.set_lengths(estimate_lengths(np.array(self._body_buffer), self.db.mean_lengths, self.offsets))
             except ProportionError:
                 return
             self._body_buffer = [markers]  # count the standard pose from the first usable frame
         elif n == n_cfg and self._pending_body is None:
             try:
-                lengths = estimate_lengths(np.array(self._body_buffer), self.db.mean_lengths)
+                lengths = estimate_lengths(np.array(self._body_buffer), self.db.mean_lengths, self.offsets)
             except ProportionError:
                 return
             box: dict = {}
@@ -255,15 +272,16 @@ class Reconstructor:
         trees = self._trees
         feat_cols, n_cols = self._cols[cfg.parts]
         dims, n_dims = self._dims[cfg.parts]
-        status, q, R, o, d, iters, resid, n_seen = kernels.frame(
-            markers, has_pred, h.n, h.q1, h.q2, h.has_state, h.R, h.o, h.dirs, t - h.t_last if h.n else 0.0,
+        status, q, R, o, d, iters, resid, n_seen, mk = kernels.frame(
+            markers, has_pred, h.n, h.q1, h.q2, h.m1, h.m2, h.has_state, h.R, h.o, h.dirs, t - h.t_last if h.n else 0.0,
             trees, self.index.features, feat_cols, n_cols, UP_WEIGHT, self.index.R_A, self.db.dirs, self.db.up,
             min(cfg.k, len(self.db)),
-            dims, n_dims, self._cos, self._sin, self.lengths, self._floor2, cfg.prior_weight, cfg.sigma_marker,
+            dims, n_dims, self._cos, self._sin, self.lengths, self.offsets, self._floor2, cfg.prior_weight, cfg.sigma_marker,
             cfg.accel, cfg.smooth_floor, cfg.min_markers, kernels.G, cfg.max_iter, cfg.tol)
         if status == 2:
             return PoseResult(q, float("nan"), int(n_seen), 0, "unsolved")
         h.q2, h.q1, h.n = h.q1, q, min(h.n + 1, 2)
+        h.m2, h.m1 = h.m1, mk
         h.R, h.o, h.dirs, h.has_state, h.t_last = R, o, d, True, t
         if status == 0:
             h.t_seen = t
@@ -295,31 +313,33 @@ def _merge(a: PoseResult, b: PoseResult, lengths: np.ndarray) -> np.ndarray:
 
 def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = None,
                      config: ReconstructConfig | None = None, lengths: np.ndarray | None = None,
-                     progress=None, both_ways: bool = True) -> tuple[np.ndarray, dict]:
+                     progress=None, both_ways: bool = True,
+                     offsets: np.ndarray | None = None) -> tuple[np.ndarray, dict]:
     """Reconstruct a whole take offline.
 
     markers: (F, 8, 3) world metres, NaN = unseen; t: (F,) seconds. lengths: subject bone lengths
     (8,), default: estimated from the whole take. progress: optional callable(n_frames_done).
     both_ways: solve the take forwards (exactly as live) and backwards in time and merge the two
     states per frame (the temporal model then sees the future too); False gives exactly the
-    live poses.
+    live poses. offsets: (8, 3) marker offsets in segment frames (None: joint centres); the
+    joints returned are joint centres either way.
     Returns joints (F, 13, 3) (NaN frames where unsolved) and an info dict with per-frame
     ``residual`` (F,), ``n_markers`` (F,), ``iterations`` (F,), ``status`` (F,) and the
     ``lengths`` (8,), ``ms_per_frame`` (per solve).
     """
     db = db if db is not None else load_default_db()
     if lengths is None:
-        lengths = estimate_lengths(markers, db.mean_lengths)
+        lengths = estimate_lengths(markers, db.mean_lengths, offsets)
     lengths = np.asarray(lengths, float)
     F = len(t)
     t0 = time.perf_counter()
-    fwd = _run(Reconstructor(db, config, lengths), markers, t, np.arange(F), progress)
+    fwd = _run(Reconstructor(db, config, lengths, offsets), markers, t, np.arange(F), progress)
     n_solves = F
     results = fwd
     joints = np.array([r.joints for r in fwd]).reshape(F, N_JOINTS, 3)
     if both_ways and F > 1:
         # time runs backwards: feed -t so the solver sees increasing times
-        bwd = _run(Reconstructor(db, config, lengths), markers, -np.asarray(t, float), np.arange(F)[::-1], progress)
+        bwd = _run(Reconstructor(db, config, lengths, offsets), markers, -np.asarray(t, float), np.arange(F)[::-1], progress)
         n_solves += F
         for i in range(F):
             a, b = fwd[i], bwd[i]
@@ -333,5 +353,6 @@ def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = N
             "n_markers": np.array([r.n_markers for r in results], np.int16),
             "iterations": np.array([r.iterations for r in results], np.int16),
             "status": np.array([r.status for r in results], dtype="<U8"),
-            "lengths": lengths, "ms_per_frame": 1e3 * elapsed / max(n_solves, 1)}
+            "lengths": lengths, "ms_per_frame": 1e3 * elapsed / max(n_solves, 1),
+            "offsets": np.zeros((N_MARKERS, 3)) if offsets is None else np.asarray(offsets, float)}
     return joints, info

@@ -16,13 +16,21 @@ Messages (JSON text frames, server -> page)::
 
     {"type": "hello", "joint_names": [...13], "marker_names": [...8], "bones": [[i, j], ...],
      "recording": bool}
-    {"type": "pose", "seq": n, "t": s, "joints": [[x, y, z] | null, ...13],
+    {"type": "pose", "seq": n, "t": s, "t0": s (first pose of the session), "joints": [[x, y, z] | null, ...13],
      "markers": [[x, y, z] | null, ...8], "quality": {...}}                    world m, Z up
+    (quality: residual_m, n_markers, label_mode, label_margin_m, flags, poor: [reasons], ...)
     {"type": "blobs", "mote": id, "size": [w, h], "uv": [[u, v], ...], "labels": [0..7 | 255]}
     {"type": "status", ...whatever dict the server publishes (motes, fps, latency_ms, drops,
      recording)...}
 
 page -> server: ``{"type": "record", "start": true|false}`` calls ``on_record(start)``.
+
+Who may connect (``docs/security.md``): a browser's WebSocket is accepted only from the page's
+own origin (its ``Origin`` header must be ``http://`` + the ``Host`` it asked for, or one of
+``allowed_origins``), so another site open in the same browser can neither read the poses nor
+start a recording. Bound to loopback, the ``Host`` must be a loopback name (no DNS rebinding).
+Bound beyond loopback, every request needs the viewer's token (``?token=...`` in the printed
+URL; the page then keeps it in a same-site cookie). Refusals are counted in :attr:`Viewer.stats`.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ import json
 import logging
 import math
 import mimetypes
+import secrets
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -44,6 +53,8 @@ from samba_common.skeleton import BONES, JOINT_NAMES, MARKER_NAMES
 
 log = logging.getLogger(__name__)
 
+TOKEN_COOKIE = "samba_viewer_token"
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1", "[::1]")
 STATIC_FILES = ("index.html", "viewer.js", "viewer.css", "three.module.min.js", "LICENSE.three.txt")
 WRITE_BUFFER_LIMIT = 256 * 1024  # bytes queued for one browser before messages to it are skipped
 
@@ -63,6 +74,7 @@ class ViewerStats:
     bad_client_messages: int = 0
     bad_published: int = 0
     clients: int = 0
+    refused: int = 0
 
 
 def _rows(a: np.ndarray | None, n: int) -> list:
@@ -92,8 +104,9 @@ def _clean(obj: Any) -> Any:
 
 
 def _pose_json(seq: int, item: tuple) -> str:
-    t, joints, markers, quality = item
-    return json.dumps({"type": "pose", "seq": seq, "t": _clean(t), "joints": _rows(joints, len(JOINT_NAMES)),
+    t, joints, markers, quality, t0 = item
+    return json.dumps({"type": "pose", "seq": seq, "t": _clean(t), "t0": _clean(t0),
+                       "joints": _rows(joints, len(JOINT_NAMES)),
                        "markers": _rows(markers, len(MARKER_NAMES)), "quality": _clean(quality)}, allow_nan=False)
 
 
@@ -113,14 +126,23 @@ class Viewer:
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8080,
-                 on_record: Callable[[bool], None] | None = None, max_rate: float = 60.0):
+                 on_record: Callable[[bool], None] | None = None, max_rate: float = 60.0,
+                 token: str | None = None, allowed_origins: tuple[str, ...] = ()):
+        """token: required of every request; default None = none on loopback, a random one
+        when ``host`` is not a loopback address. allowed_origins: more origins (e.g.
+        ``"https://mocap.lab.example"``) whose pages may connect besides the viewer's own."""
         self.host = host
+        self.loopback = is_loopback(host)
+        self.token = token if token is not None else (None if self.loopback else secrets.token_urlsafe(18))
+        self.allowed_origins = tuple(o.rstrip("/").lower() for o in allowed_origins)
         self.port = port
         self.on_record = on_record
         self.max_rate = max_rate
         self.stats = ViewerStats()
         self._lock = threading.Lock()
         self._pose: tuple | None = None
+        self._t0: float | None = None  # t of the session's first pose (s)
+        self._t_last = float("-inf")
         self._blobs: dict[str, tuple] = {}
         self._status: str | None = None
         self._recording = False
@@ -133,9 +155,13 @@ class Viewer:
     # ------------------------------------------------------------------ public API
     @property
     def url(self) -> str:
-        """The page's address, e.g. ``http://127.0.0.1:8080/``."""
+        """The page's address, e.g. ``http://127.0.0.1:8080/`` (with ``?token=...`` when one is needed)."""
         host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}/"
+        if host in ("0.0.0.0", "[::]", ""):  # all interfaces: give this machine's name
+            import socket
+
+            host = socket.gethostname()
+        return f"http://{host}:{self.port}/" + (f"?token={self.token}" if self.token else "")
 
     def start(self, timeout: float = 5.0) -> "Viewer":
         """Bind and serve in a background thread; raises ViewerError if the port cannot be bound."""
@@ -173,7 +199,15 @@ class Viewer:
         if self._loop is None:
             return
         m = None if markers is None else np.array(markers, dtype=np.float64)
-        item = (float(t), np.array(joints, dtype=np.float64), m, dict(quality or {}))
+        t = float(t)
+        with self._lock:
+            # the session's first pose (or the first after time went back, e.g. a new replay):
+            # the page shows t - t0, the time since the start
+            if self._t0 is None or t < self._t_last - 1.0:
+                self._t0 = t
+            self._t_last = t
+            t0 = self._t0
+        item = (t, np.array(joints, dtype=np.float64), m, dict(quality or {}), t0)
         with self._lock:  # encoded by the pump, at most max_rate times per second
             self.stats.poses_published += 1
             self._pose = (self.stats.poses_published, item)
@@ -276,11 +310,17 @@ class Viewer:
         return len(ready)
 
     def _http(self, connection, request):
-        """Serve static files; return None for /ws so the WebSocket handshake proceeds."""
+        """Serve static files; return None for /ws so the WebSocket handshake proceeds.
+        Requests that fail :meth:`_refusal` get 403 (counted, logged once at info level)."""
         from websockets.datastructures import Headers
         from websockets.http11 import Response
 
         path = request.path.split("?", 1)[0]
+        why = self._refusal(request, websocket=path == "/ws")
+        if why is not None:
+            self.stats.refused += 1
+            log.info("viewer: refused %s (%s)", path, why)
+            return connection.respond(403, f"forbidden: {why}\n")
         if path == "/ws":
             return None
         name = "index.html" if path in ("/", "/index.html") else path.removeprefix("/static/")
@@ -292,8 +332,32 @@ class Viewer:
         if name.endswith(".js"):
             ctype = "text/javascript"
         headers = Headers([("Content-Type", f"{ctype}; charset=utf-8" if ctype.startswith("text") else ctype),
-                           ("Content-Length", str(len(body))), ("Cache-Control", "no-cache")])
+                           ("Content-Length", str(len(body))), ("Cache-Control", "no-cache"),
+                           ("X-Frame-Options", "DENY"), ("X-Content-Type-Options", "nosniff")])
+        if self.token:  # the page's WebSocket and script requests then carry it without the query
+            headers["Set-Cookie"] = f"{TOKEN_COOKIE}={self.token}; Path=/; HttpOnly; SameSite=Strict"
         return Response(200, "OK", headers, body)
+
+    def _refusal(self, request, websocket: bool) -> str | None:
+        """Why ``request`` may not be served (None = allowed): DNS-rebinding Host on loopback,
+        a WebSocket from another origin, or a missing/wrong token."""
+        headers = request.headers
+        hosts, origins = headers.get_all("Host"), headers.get_all("Origin")
+        if len(hosts) != 1 or len(origins) > 1:
+            return "repeated Host or Origin header"
+        host = hosts[0].strip().lower()
+        if self.loopback and _host_name(host) not in LOOPBACK_HOSTS:
+            return f"Host {host!r} is not this loopback viewer"
+        if websocket:
+            origin = (origins[0] if origins else "").strip().rstrip("/").lower()
+            # browsers always send Origin on a WebSocket; tools without one are not a web page
+            if origin and origin not in (f"http://{host}", f"https://{host}", *self.allowed_origins):
+                return f"WebSocket from origin {origin!r}, not the viewer's own (http://{host})"
+        if self.token:
+            given = _query_param(request.path, "token") or _cookie(headers.get("Cookie") or "", TOKEN_COOKIE)
+            if not given or not secrets.compare_digest(given.encode(), self.token.encode()):
+                return "token missing or wrong (open the URL printed by the server)"
+        return None
 
     async def _handler(self, ws) -> None:
         self._clients.add(ws)
@@ -329,3 +393,39 @@ class Viewer:
                 self.on_record(msg["start"])
             except Exception:  # noqa: BLE001 - the callback's failure must not kill the viewer
                 log.exception("on_record callback failed")
+
+
+def is_loopback(host: str) -> bool:
+    """True for 127.0.0.0/8, ::1 and "localhost"."""
+    import ipaddress
+
+    h = host.strip("[]").lower()
+    if h == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(h).is_loopback
+    except ValueError:
+        return False
+
+
+def _host_name(host_header: str) -> str:
+    """``Host`` header without its port: "127.0.0.1:8080" -> "127.0.0.1", "[::1]:80" -> "[::1]"."""
+    if host_header.startswith("["):
+        return host_header.split("]", 1)[0] + "]"
+    name = host_header.rsplit(":", 1)[0] if host_header.count(":") == 1 else host_header
+    return "127.0.0.1" if name.startswith("127.") else name
+
+
+def _query_param(path: str, name: str) -> str | None:
+    from urllib.parse import parse_qs, urlsplit
+
+    vals = parse_qs(urlsplit(path).query).get(name)
+    return vals[0] if vals else None
+
+
+def _cookie(header: str, name: str) -> str | None:
+    for part in header.split(";"):
+        k, _, v = part.strip().partition("=")
+        if k == name:
+            return v
+    return None

@@ -222,3 +222,80 @@ def test_self_calibration_undoes_mirrored_labels(mirrored) -> None:
     out, _ = self_calibrate(_intrinsics_only(rig), uv, tibia=tibia, max_frames=120)
     ce, re = pose_errors(out, rig, mode="absolute")
     assert ce.max() < 0.1 and re.max() < 1.0
+
+
+def _board_rig(rig: CameraRig, views: int = 30, seed: int = 0) -> CameraRig:
+    """Intrinsics as a user gets them: the board step on rendered checkerboard images, with
+    the board step's uncertainties in the metadata (the wand step's priors)."""
+    import cv2
+
+    from samba_server.calibrate.intrinsics import Board, detect, render_board_views
+    from samba_server.calibrate.wand import STD_KEY
+
+    board = Board.parse("checkerboard:7x5:0.03")
+    cams, meta = [], {}
+    for i, c in enumerate(rig.cameras):
+        found = [detect(board, im) for im in render_board_views(c, board, views, seed=seed + i)]
+        found = [f for f in found if f is not None]
+        _, K, d, _, _, std, _, _ = cv2.calibrateCameraExtended([f[0] for f in found], [f[1].astype(np.float32) for f in found],
+                                                              c.size, None, None, flags=cv2.CALIB_FIX_K3)
+        cams.append(Camera(c.name, c.size, K, d.ravel()[:5]))
+        meta[STD_KEY + c.name] = [float(v) for v in std.ravel()[:9]]
+    return CameraRig(cams, meta)
+
+
+def test_bundle_adjustment_refines_intrinsics_with_priors() -> None:
+    """A focal length 1 % off (cam1) and a principal point 1.5 px off (cam2) are pulled back
+    toward the truth by the wand, within their reported uncertainty; the poses follow."""
+    from samba_server.calibrate.wand import STD_KEY
+
+    rig = default_rig(4)
+    obs = simulate_wand(rig, 800, 0.5, noise_px=0.2, seed=4, fps=10.0)
+    start = _intrinsics_only(rig)
+    start.cameras[1].matrix[0, 0] *= 1.01
+    start.cameras[1].matrix[1, 1] *= 1.01
+    start.cameras[2].matrix[0, 2] += 1.5
+    start.metadata.update({STD_KEY + c.name: [1.4, 1.4, 1.5, 1.5, 0.02, 0.05, 1e-3, 1e-3, 0.0] for c in rig.cameras})
+    fixed, _ = calibrate_wand(start, obs.uv, [0.0, 0.5], refine=())
+    out, rep = calibrate_wand(start, obs.uv, [0.0, 0.5])
+    f_err = abs(out.cameras[1].matrix[0, 0] - 140.0)
+    assert f_err < 0.5 * 1.4, f_err  # from 1.4 px off to well within the prior
+    assert f_err < 3 * rep.uncertainty.focal_sigma_px[1]
+    assert abs(out.cameras[2].matrix[0, 2] - 79.5) < 1.0
+    assert abs(out.cameras[1].matrix[1, 1] / out.cameras[1].matrix[0, 0] - 1.0) < 1e-9  # aspect kept
+    ce_fixed, _ = pose_errors(fixed, rig)
+    ce, _ = pose_errors(out, rig)
+    assert ce[1] < 0.25 * ce_fixed[1] and ce.max() < ce_fixed.max(), (ce, ce_fixed)  # the camera that was off
+    assert any("fx" in v for v in rep.intrinsics_change.values())
+    assert any("centre within" in line for line in rep.lines())
+
+
+def test_intrinsics_without_board_uncertainties_are_kept() -> None:
+    rig = default_rig(4)
+    obs = simulate_wand(rig, 300, 0.5, noise_px=0.2, seed=1, fps=10.0)
+    out, _ = calibrate_wand(_intrinsics_only(rig), obs.uv, [0.0, 0.5])
+    for a, b in zip(out.cameras, rig.cameras):
+        assert np.allclose(a.matrix, b.matrix, atol=1e-4) and np.allclose(a.dist, b.dist, atol=1e-6)
+
+
+def test_reported_uncertainty_covers_the_true_error() -> None:
+    """Board step first (rendered checkerboards), then the wand: over 3 takes x 4 cameras the
+    true centre errors lie within the reported 95 % radii (at most one miss), the radii are
+    not absurdly loose (median error / radius > 0.1), and the scale error is within 3 sigma."""
+    from samba_server.calibrate.uncertainty import rig_scale
+
+    rig = default_rig(4)
+    ratios, scale_z = [], []
+    for seed in range(3):
+        start = _board_rig(rig, 30, seed=10 * seed)
+        obs = simulate_wand(rig, 600, 0.5, noise_px=0.2, seed=seed, fps=10.0)
+        out, rep = calibrate_wand(start, obs.uv, [0.0, 0.5])
+        ce, _ = pose_errors(out, rig)
+        u = rep.uncertainty
+        ratios += list(ce / u.centre_95_m)
+        s_err = rig_scale(np.stack([c.center for c in out.cameras])) / rig_scale(np.stack([c.center for c in rig.cameras])) - 1
+        scale_z.append(abs(s_err) / u.scale_sigma)
+    ratios = np.array(ratios)
+    assert np.sum(ratios > 1.0) <= 1, ratios
+    assert np.median(ratios) > 0.1, ratios
+    assert max(scale_z) < 3.0, scale_z

@@ -13,8 +13,9 @@ from samba_common.bvh import BvhError, read_bvh
 from samba_common.skeleton import J
 from samba_server.export.bvh import fk_positions, write_bvh
 from samba_server.export.take import ExportTake, TakeError
+from tests.shared_data import CMU_DIR, CMU_SKIP
 
-CMU = Path("/work/shared/data/cmu-bvh/002_01.bvh")
+CMU = CMU_DIR / "002_01.bvh"
 
 
 def _take(joints, t, name="synthetic"):
@@ -103,7 +104,7 @@ def test_all_nan_take_is_refused(tmp_path, walk):
     assert not (tmp_path / "x.bvh").exists()
 
 
-@pytest.mark.skipif(not CMU.exists(), reason="shared CMU clips not present")
+@pytest.mark.skipif(not CMU.exists(), reason=CMU_SKIP)
 def test_real_clip_legs_exact_and_error_reported(tmp_path):
     """A real CMU clip: its spine bends, so torso length varies; legs keep their lengths."""
     from samba_common.bvh import load_bvh

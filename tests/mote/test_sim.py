@@ -6,6 +6,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
 from samba_common.calib import CameraRig
 from samba_common.formats import load_joints, load_markers
@@ -13,8 +14,9 @@ from samba_common.skeleton import J, MARKER_JOINT
 from samba_mote.sim import SimConfig, make_take
 from samba_mote.cli.sim import main as sim_main
 from samba_mote.sources import open_source
+from tests.shared_data import CMU_DIR, CMU_SKIP
 
-BVH = Path("/work/shared/data/cmu-bvh/005_03.bvh")
+BVH = CMU_DIR / "005_03.bvh"
 
 
 def test_take_files_round_trip(small_take) -> None:
@@ -58,7 +60,7 @@ def test_tpose_lead_in(small_take) -> None:
 
 def test_bvh_take_stays_in_view(tmp_path) -> None:
     if not BVH.exists():
-        return
+        pytest.skip(CMU_SKIP)
     take = make_take(tmp_path, BVH, rig=4, seconds=1.0, write=False)
     vis = np.stack([c.visible for c in take.cameras])
     inside = np.stack([(c.uv[..., 0] > 0) & (c.uv[..., 0] < 160) & (c.uv[..., 1] > 0) & (c.uv[..., 1] < 120)

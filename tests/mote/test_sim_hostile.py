@@ -16,10 +16,11 @@ from samba_mote.cli.sim import main as sim_main
 from samba_mote.sim import SimConfig, load_motion, make_take, prepare_motion, tpose
 from samba_mote.sim.motion import DEFAULT_LENGTHS
 from samba_mote.sim.render import occluded
+from tests.shared_data import CMU_DIR, CMU_SKIP
 
-CMU = Path("/work/shared/data/cmu-bvh")
+CMU = CMU_DIR
 WALK = CMU / "002_01.bvh"  # a 2.85 s straight walk: its centred first frame is ~1.9 m from the origin
-needs_walk = pytest.mark.skipif(not WALK.exists(), reason="shared CMU BVH clips not available")
+needs_walk = pytest.mark.skipif(not WALK.exists(), reason=CMU_SKIP)
 
 
 def _hip_mid(j: np.ndarray) -> np.ndarray:
@@ -210,7 +211,7 @@ def test_torso_hides_the_far_wrist_from_the_side() -> None:
     assert not back.any()  # from behind, every marker is in plain view
 
 
-@pytest.mark.skipif(not (CMU / "005_01.bvh").exists(), reason="shared CMU BVH clips not available")
+@pytest.mark.skipif(not (CMU / "005_01.bvh").exists(), reason=CMU_SKIP)
 def test_walk_hides_some_markers_in_some_views() -> None:
     take = make_take("unused", CMU / "005_01.bvh", rig=default_rig(4), seconds=2.0, write=False)
     n = take.n_tpose

@@ -17,12 +17,13 @@ from samba_mote.pipeline import MoteConfig, MotePipeline
 from samba_mote.sim import SimConfig, make_take
 from samba_mote.sim.score import score_labels
 from samba_mote.track import TrackConfig, label_tpose
+from tests.shared_data import CMU_DIR, CMU_SKIP
 
 #: the mote's own 2D labelling starts from a standard pose with the feet apart (at hip width the
 #: knee and ankle blobs merge at 160x120 and only the server's 3D labelling can name them)
 APART = SimConfig(tpose_stance="apart", pose_at=None)
 
-BVH = Path("/work/shared/data/cmu-bvh")
+BVH = CMU_DIR
 
 
 def _run(take, cam, config=None, calibration=True):
@@ -36,7 +37,7 @@ CLIPS = [("002_10", 0.0, 5.0), ("005_03", 0.0, 3.5), ("006_14", 0.0, 4.0), ("002
          ("002_06", 0.0, 4.0)]
 
 
-@pytest.mark.skipif(not BVH.exists(), reason="shared BVH clips not available")
+@pytest.mark.skipif(not BVH.exists(), reason=CMU_SKIP)
 @pytest.mark.parametrize("clip,start,seconds", CLIPS)
 def test_labels_correct_on_clips(clip: str, start: float, seconds: float) -> None:
     take = make_take("unused", BVH / f"{clip}.bvh", rig=4, start=start, seconds=seconds, seed=7, config=APART, write=False)

@@ -60,7 +60,7 @@ def test_zenoh_mote_to_server_loopback(free_port: int, small_take) -> None:
 
         rig = CameraRig.loads(raw)
         pipe = MotePipeline(None, "cam0", calibration=rig)
-        runner = MoteRunner(lambda: open_source(f"file:{small_take.video('cam0')}"), pipe, Resilient(lambda: mote),
+        runner = MoteRunner(lambda: open_source(f"file:{small_take.video('cam0')}?realtime=0"), pipe, Resilient(lambda: mote),
                             status_period=0.05, max_frames=60)
         stats = runner.run()
         assert stats.frames == 60 and stats.packets_sent == 60 and stats.send_failures == 0
@@ -162,7 +162,7 @@ def test_mcap_record(tmp_path, small_take) -> None:
 
     rec = McapRecorder(tmp_path / "cam0.mcap", "cam0")
     pipe = MotePipeline(None, "cam0")
-    runner = MoteRunner(lambda: open_source(f"file:{small_take.video('cam0')}"), pipe, InprocTransport(InprocBus()),
+    runner = MoteRunner(lambda: open_source(f"file:{small_take.video('cam0')}?realtime=0"), pipe, InprocTransport(InprocBus()),
                         recorder=rec, max_frames=25)
     runner.run()
     rec.close()
@@ -208,7 +208,7 @@ def test_cli_serial_record_and_exit_codes(tmp_path, small_take) -> None:
     from samba_mote.cli.mote import main
 
     out = tmp_path / "rec.mcap"
-    assert main(["--id", "cam1", "--source", f"file:{small_take.video('cam1')}", "--transport", "serial:loop://",
+    assert main(["--id", "cam1", "--source", f"file:{small_take.video('cam1')}?realtime=0", "--transport", "serial:loop://",
                  "--calibration", str(small_take.out_dir / "calibration.toml"), "--record", str(out),
                  "--preview", str(tmp_path / "preview"), "--max-frames", "40"]) == 0
     assert out.stat().st_size > 1000

@@ -37,10 +37,7 @@ def _errors(poses, sim, joints, skip=(48, 100)):
     return np.array(m_err), np.array(j_err)
 
 
-@pytest.mark.parametrize("n_motes", [
-    pytest.param(2, marks=pytest.mark.xfail(reason="3D labelling with 2 views re-identifies the markers wrongly after "
-                                                   "the dead mote returns (docs/labelling.md: known gap)")),
-    4])
+@pytest.mark.parametrize("n_motes", [2, 4])
 def test_live_take_with_network_trouble(tmp_path, endpoint, n_motes):
     import zenoh
 

@@ -327,14 +327,20 @@ def test_full_disk_holds_then_drops_and_resumes(tmp_path, caplog):
     assert "disk full" in caplog.text
     sink.budget = 10**9  # space freed: the backlog goes out with the next message
     assert rec.write_packet("cam0", b"after", arrival_ns=99, seq=99)
-    assert rec.stats.pending == 0 and "resumed" in caplog.text
+    # the backlog completes the first file; after the gap the take goes on in a new file
+    assert rec.stats.pending == 0 and "continues in" in caplog.text
+    second = tmp_path / "full-2.mcap"
+    assert rec.stats.files == [path, second]
     rec.close()
     os.close(fd)
     got = list(iter_messages(path))
     kept = [i for i, o in enumerate(ok) if o]
-    assert [m.sequence for m in got] == kept + [99]  # every accepted message, in order
+    assert [m.sequence for m in got] == kept  # every accepted message before the gap, in order
     with path.open("rb") as fh:
-        assert make_reader(fh).get_summary().statistics.message_count == len(kept) + 1
+        assert make_reader(fh).get_summary().statistics.message_count == len(kept)
+    assert [m.sequence for m in iter_messages(second)] == [99]
+    with second.open("rb") as fh:
+        assert make_reader(fh).get_summary().statistics.message_count == 1
 
 
 def test_unwritable_target_is_a_clear_error(tmp_path):

@@ -3,12 +3,14 @@
 // World frame: Z up, metres (FORMATS.md).
 import * as THREE from "/static/three.module.min.js";
 
+const BONE_OK = 0x7aa2f7, BONE_POOR = 0xffa028; // skeleton colour: good / poor pose
 const LABEL_COLORS = ["#7aa2f7", "#f7768e", "#9ece6a", "#e0af68", "#bb9af7", "#2ac3de", "#ff9e64", "#c0caf5"];
 const $ = (id) => document.getElementById(id);
 
 const state = {
   jointNames: [], markerNames: [], bones: [],
-  joints: null, markers: null, poses: 0, recording: false,
+  joints: null, markers: null, poses: 0, recording: false, poor: false,
+  t: null, recStartT: null, // pose time (s) now and when the recording started
   motes: new Map(), // id -> {canvas, ctx, count, last}
   status: {},
   cam: { az: -0.6, el: 0.3, dist: 4.2, target: [0, 0, 0.9] }, follow: true,
@@ -50,7 +52,7 @@ function makeThree(cv) {
   for (let i = 0; i < 8; i++) { const m = new THREE.Mesh(markerGeo, markerMat); m.visible = false; scene.add(m); markers.push(m); }
   const boneGeo = new THREE.BufferGeometry();
   boneGeo.setAttribute("position", new THREE.BufferAttribute(new Float32Array(24 * 3 * 2), 3));
-  const bones = new THREE.LineSegments(boneGeo, new THREE.LineBasicMaterial({ color: 0x7aa2f7 }));
+  const bones = new THREE.LineSegments(boneGeo, new THREE.LineBasicMaterial({ color: BONE_OK }));
   bones.frustumCulled = false;
   scene.add(bones);
   return { renderer, scene, camera, joints, markers, bones };
@@ -111,6 +113,7 @@ function draw() {
     let n = 0;
     for (const [a, b] of segments(J)) { pos.setXYZ(n++, ...a); pos.setXYZ(n++, ...b); }
     r.bones.geometry.setDrawRange(0, n);
+    r.bones.material.color.setHex(state.poor ? BONE_POOR : BONE_OK);
     pos.needsUpdate = true;
     r.renderer.render(r.scene, r.camera);
   } else {
@@ -141,7 +144,7 @@ function draw2d(eye) {
     }
   }
   const J = state.joints || [], M = state.markers || [];
-  g.strokeStyle = "#7aa2f7"; g.lineWidth = 3;
+  g.strokeStyle = state.poor ? "#ffa028" : "#7aa2f7"; g.lineWidth = 3;
   for (const [a, b] of segments(J)) {
     const pa = proj(a), pb = proj(b);
     if (pa && pb) { g.beginPath(); g.moveTo(...pa); g.lineTo(...pb); g.stroke(); }
@@ -223,21 +226,38 @@ function showStatus(s) {
     const m = motes[id], tr = document.createElement("tr");
     const ok = m.alive !== false;
     tr.innerHTML = `<td>${id}</td><td class="${ok ? "ok" : "bad"}">${ok ? "yes" : "no"}</td>` +
-      `<td>${fmt(m.fps)}</td><td>${m.blobs ?? "–"}</td><td>${m.drops ?? "–"}</td>`;
+      `<td>${fmt(m.fps)}</td><td>${m.blobs ?? "–"}</td><td class="${m.drops ? "bad" : ""}">${m.drops ?? "–"}</td>`;
     body.appendChild(tr);
     moteView(id).box.style.opacity = ok ? "1" : "0.4";
   }
   if (s.recording !== undefined) setRecording(!!s.recording);
 }
 
+// "m:ss" of a duration in seconds
+const clock = (s) => `${Math.floor(s / 60)}:${String(Math.floor(s % 60)).padStart(2, "0")}`;
+
 function setRecording(on) {
+  if (on && !state.recording) state.recStartT = state.t; // the take starts now (pose time)
+  if (!on) state.recStartT = null;
   state.recording = on;
   const el = $("rec-state");
-  el.textContent = on ? "● recording" : "not recording";
+  el.textContent = on ? "● recording" + (state.recStartT !== null && state.t !== null ? " " + clock(state.t - state.recStartT) : "")
+    : "not recording";
   el.className = "pill " + (on ? "rec" : "off");
   $("rec-start").disabled = on;
   $("rec-stop").disabled = !on;
   document.body.dataset.recording = on ? "1" : "0";
+}
+
+// a poor pose (few markers, large residual, labels lost or ambiguous, unsolved): amber skeleton,
+// amber HUD and a warning sign with the reasons the server gives in quality.poor
+function showQuality(q) {
+  const reasons = Array.isArray(q.poor) ? q.poor : [];
+  state.poor = reasons.length > 0;
+  $("hud").classList.toggle("poor", state.poor);
+  $("pose-poor").textContent = state.poor ? "⚠ poor pose: " + reasons.join(", ") : "";
+  $("pose-mode").textContent = q.label_mode ? `labels ${q.label_mode}` : "";
+  document.body.dataset.poseQuality = state.poor ? "poor" : "good";
 }
 
 // ---------------------------------------------------------------- socket
@@ -260,10 +280,15 @@ function connect() {
       state.joints = msg.joints; state.markers = msg.markers; state.poses += 1; dirty = true;
       $("pose-count").textContent = state.poses;
       document.body.dataset.poses = state.poses;
-      $("pose-t").textContent = fmt(msg.t, 2);
+      // time since the session's first pose (the server's t0), not the clock's epoch
+      state.t = msg.t;
+      if (state.recording && state.recStartT === null) state.recStartT = msg.t;
+      $("pose-t").textContent = fmt(msg.t - (msg.t0 ?? msg.t), 2);
+      if (state.recording) setRecording(true);
       const q = msg.quality || {};
       $("pose-res").textContent = q.residual_m != null ? fmt(q.residual_m * 1000, 1) : "–";
       $("pose-nm").textContent = q.n_markers ?? msg.markers.filter((p) => p).length;
+      showQuality(q);
     } else if (msg.type === "blobs") {
       drawBlobs(msg);
     } else if (msg.type === "status") {

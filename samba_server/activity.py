@@ -1,0 +1,58 @@
+"""Per-mote activity over a take, to warn about motes that silently contributed nothing.
+
+A :class:`MoteActivity` sees every decoded :class:`~samba_common.wire.MarkerPacket` (as a
+``Server.packet_listeners`` entry, or called directly by ``samba-process``) and, at the end
+of a take, :meth:`MoteActivity.warnings` gives one line per problem: a camera of the
+calibration that sent nothing, a mote that saw no blob in any frame, a mote that saw blobs
+but never labelled a marker (its blobs are still used, the server names them in 3D, but the
+user should know the mote never found the standard pose).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class MoteCounts:
+    """Packets of one mote: total, with at least one blob, with at least one labelled marker."""
+
+    packets: int = 0
+    with_blobs: int = 0
+    with_labels: int = 0
+
+
+class MoteActivity:
+    """Counts per mote (callable with a MarkerPacket). ``cameras``: the calibration's names."""
+
+    def __init__(self, cameras: list[str] | tuple[str, ...] = (), n_markers: int = 8) -> None:
+        self.cameras = list(cameras)
+        self.n_markers = n_markers
+        self.motes: dict[str, MoteCounts] = {}
+
+    def __call__(self, pkt) -> None:
+        c = self.motes.setdefault(pkt.mote_id, MoteCounts())
+        c.packets += 1
+        labels = np.asarray(pkt.labels)
+        if len(labels):
+            c.with_blobs += 1
+            if (labels < self.n_markers).any():
+                c.with_labels += 1
+
+    def warnings(self, labelled: bool = True) -> list[str]:
+        """One line per mote that contributed nothing useful. ``labelled=False`` for takes where
+        the motes publish unlabelled blobs on purpose (wand calibration)."""
+        out = []
+        for cam in self.cameras:
+            if cam not in self.motes:
+                out.append(f"camera {cam} of the calibration sent no packets in the whole take")
+        for mote, c in sorted(self.motes.items()):
+            if c.with_blobs == 0:
+                out.append(f"mote {mote}: no blob in any of its {c.packets} frames (lens covered, exposure or "
+                           "threshold? check with samba-mote --preview DIR)")
+            elif labelled and c.with_labels == 0:
+                out.append(f"mote {mote}: blobs in {c.with_blobs} of {c.packets} frames but it never labelled a "
+                           "marker (it did not see the standard pose); the server still names its blobs in 3D")
+        return out

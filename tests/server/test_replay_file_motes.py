@@ -1,0 +1,128 @@
+"""Two file motes on real Zenoh (loopback) -> live server -> recording; the recording replays
+exactly in-process (``samba-replay --out``) and, republished at full speed into a second live
+server (``samba-replay --speed max --connect``), gives every frame with the same grouping."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from samba_mote.pipeline import MotePipeline
+from samba_mote.runner import MoteRunner
+from samba_mote.sources import SourceGone, open_source
+from samba_mote.transports import ZenohTransport
+from samba_server.app import build_server, load_server_configs, make_reconstructor
+from samba_server.live import LiveServer
+from samba_server.replay import Player, replay_into, take_calibration
+from samba_server.server import Server, ServerConfig
+
+from .conftest import free_endpoint
+
+
+@pytest.fixture(scope="module")
+def file_take(tmp_path_factory):
+    from samba_mote.sim import SimConfig, make_take
+
+    return make_take(tmp_path_factory.mktemp("fm"), None, rig=2, seconds=1.0, seed=3,
+                     config=SimConfig(tpose_stance="apart", pose_at=None))
+
+
+def _run_motes(take, endpoint: str, session: str) -> list:
+    """Both motes play their video in real time from the same start instant, like cameras."""
+    start = time.time() + 1.0
+    stats = [None, None]
+
+    def run(i: int, cam: str) -> None:
+        tr = ZenohTransport(cam, session, connect=(endpoint,))
+        try:
+            tr.wait_matched(5.0)
+            runner = MoteRunner(lambda: open_source(f"file:{take.video(cam)}?start={start}"),
+                                MotePipeline(None, cam, calibration=take.rig), tr)
+            stats[i] = runner.run()
+        finally:
+            tr.close()
+
+    threads = [threading.Thread(target=run, args=(i, cam)) for i, cam in enumerate(("cam0", "cam1"))]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join(timeout=60)
+    return stats
+
+
+def _replay_server(take_path, configs) -> Server:
+    toml = take_calibration(take_path)
+    from samba_common.calib import CameraRig
+
+    return Server(CameraRig.loads(toml, path=str(take_path)), toml, make_reconstructor(None, configs.reconstruct),
+                  ServerConfig(**{**configs.server.__dict__, "max_lag_ms": 0.0}), configs.sync, configs.triangulate,
+                  label_config=configs.labelling)
+
+
+def _same(a: list, b: list) -> None:
+    assert len(a) == len(b)
+    ja, jb = np.stack([p.joints for p in a]), np.stack([p.joints for p in b])
+    np.testing.assert_array_equal(np.isnan(ja), np.isnan(jb))
+    np.testing.assert_allclose(np.nan_to_num(ja), np.nan_to_num(jb), atol=1e-9, rtol=0)
+    assert [p.t_ns - a[0].t_ns for p in a] == [p.t_ns - b[0].t_ns for p in b]
+
+
+def test_file_motes_live_replay_and_max_speed(tmp_path, file_take) -> None:
+    configs = load_server_configs()  # the packaged live settings, max_lag_ms included
+    take_path = tmp_path / "take.mcap"
+    endpoint = free_endpoint()
+    server = build_server(file_take.out_dir / "calibration.toml", configs, record=str(take_path))
+    with LiveServer(server, session="fm", listen=[endpoint]):
+        stats = _run_motes(file_take, endpoint, "fm")
+        time.sleep(0.5)
+    server.recorder.close()
+    n_video = len(file_take.cameras[0].frames) if hasattr(file_take.cameras[0], "frames") else None
+    assert all(s is not None and s.end_reason == "source ended" for s in stats)
+    assert stats[0].frames == stats[1].frames and (n_video is None or stats[0].frames == n_video)
+    # real time, like a camera: about the file's 60 fps, not as fast as possible
+    assert stats[0].seconds >= 0.8 * stats[0].frames / 60.0
+    live = server.poses
+    assert len(live) >= 0.95 * stats[0].frames
+    assert sum(p.solved for p in live) >= 0.5 * len(live)
+
+    # samba-replay --out: exactly the live poses (frames whose solve live skipped are skipped again)
+    rep = _replay_server(take_path, configs)
+    replay_into(rep, take_path)
+    _same(live, rep.poses)
+
+    # samba-replay --speed max --connect: a second live server gets every frame, grouped as recorded,
+    # and solves them all (equal to an in-process replay that skips nothing)
+    endpoint2 = free_endpoint()
+    server2 = build_server(file_take.out_dir / "calibration.toml", configs)
+    with LiveServer(server2, session="fm2", listen=[endpoint2]):
+        sent = Player(take_path, "fm2", connect=[endpoint2], speed=None).play()
+    assert sent == sum(s.packets_sent for s in stats)
+    ref = _replay_server(take_path, configs)
+    import samba_server.replay as replay_mod
+
+    ref.skip_seqs = set()
+    for m in replay_mod.TakeReader(take_path):  # replay_into without the recorded skips
+        if m.mote_id is not None:
+            ref.ingest(m.mote_id, m.data, arrival_ns=m.log_time)
+        elif m.topic == replay_mod.EVENTS_TOPIC:
+            import json
+
+            ev = json.loads(m.data)
+            ref.mote_event(ev["mote_id"], ev["event"] == "join", ev["t_ns"])
+        ref.process_pending()
+    ref.finish()
+    _same(ref.poses, server2.poses)
+    assert sum(p.solved for p in server2.poses) >= sum(p.solved for p in live)
+
+
+def test_missing_video_file_fails_at_once(tmp_path) -> None:
+    from samba_mote.cli.mote import main
+
+    with pytest.raises(SourceGone, match="not found"):
+        open_source(f"file:{tmp_path / 'missing.avi'}")
+    t0 = time.monotonic()
+    assert main(["--id", "cam0", "--source", f"file:{tmp_path / 'missing.avi'}", "--transport", "serial:loop://"]) == 1
+    assert time.monotonic() - t0 < 5.0
