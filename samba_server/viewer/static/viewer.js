@@ -29,7 +29,9 @@ try {
 const ctx2d = renderer3d ? null : canvas.getContext("2d");
 
 function makeThree(cv) {
-  const renderer = new THREE.WebGLRenderer({ canvas: cv, antialias: true });
+  // preserveDrawingBuffer: the last frame stays on the canvas for screenshots (headless tests, the
+  // browser's own capture) instead of a cleared buffer between frames
+  const renderer = new THREE.WebGLRenderer({ canvas: cv, antialias: true, preserveDrawingBuffer: true });
   renderer.setPixelRatio(window.devicePixelRatio || 1);
   const scene = new THREE.Scene();
   scene.background = new THREE.Color(0x15181d);
@@ -86,8 +88,10 @@ function cameraPosition() {
           t[2] + c.dist * Math.sin(c.el)];
 }
 
+let sized = [0, 0]; // canvas size (CSS px) the renderer was last set to
 function resize() {
   const w = canvas.clientWidth, h = canvas.clientHeight;
+  sized = [w, h];
   if (renderer3d) {
     renderer3d.renderer.setSize(w, h, false);
     renderer3d.camera.aspect = w / Math.max(h, 1);
@@ -99,7 +103,12 @@ function resize() {
 window.addEventListener("resize", resize);
 resize();
 
+let lastDraw = -Infinity; // performance.now() of the last draw
 function draw() {
+  lastDraw = performance.now();
+  // the canvas may get its size after the script ran (styles still loading) without a window
+  // resize event: a renderer left at 0 x 0 draws nothing
+  if (canvas.clientWidth !== sized[0] || canvas.clientHeight !== sized[1]) resize();
   follow();
   const [x, y, z] = cameraPosition();
   if (renderer3d) {
@@ -278,6 +287,8 @@ function connect() {
       setRecording(!!msg.recording);
     } else if (msg.type === "pose") {
       state.joints = msg.joints; state.markers = msg.markers; state.poses += 1; dirty = true;
+      // throttled or headless tabs may not run animation frames: draw from the stream itself
+      if (performance.now() - lastDraw > 100) { draw(); dirty = false; }
       $("pose-count").textContent = state.poses;
       document.body.dataset.poses = state.poses;
       // time since the session's first pose (the server's t0), not the clock's epoch
