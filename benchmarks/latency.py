@@ -10,7 +10,8 @@ capture by the minimum transport latency, about 0.15 ms on loopback). Two config
   (``max_lag_ms`` from configs/server.toml skips the solve of frames that are already late).
 
 Also searched: the highest mote frame rate (4 motes) the pipeline sustains without falling
-behind (>= 95 % of frames out, median latency not growing). Appends to docs/BENCHMARKS.md.
+behind (>= 95 % of frames out, median latency not growing). Records into docs/BENCHMARKS.md
+(its two sections replaced on rerun).
 
 TLS cost: the same 4 x 60 runs over plain TCP and over mutual TLS with access control
 (``--tls``, keys from ``samba-keys``), interleaved plain/TLS/plain/TLS, side by side in their own
@@ -21,7 +22,6 @@ Usage: ``python benchmarks/latency.py [--seconds 5] [--no-write] [--tls-only]``.
 from __future__ import annotations
 
 import argparse
-import datetime
 import os
 import platform
 import socket
@@ -102,8 +102,7 @@ def main() -> int:
             best = fps
         else:
             break
-    lines = [f"## Server latency (benchmarks/latency.py) — {datetime.date.today()}",
-             f"Machine: {platform.platform()}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+    lines = [f"Machine: {platform.platform()}, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
              f"Python {platform.python_version()}. Motes simulated in a separate process, Zenoh over loopback, "
              f"{args.seconds:.0f} s per run. Latency = pose publish - frame capture time (server clock).", "",
              "| motes x fps | solve | frames out / expected | solved (skipped) | p50 ms | p99 ms | late pkts |",
@@ -112,17 +111,12 @@ def main() -> int:
         lines.append(f"| {r['motes']} x {r['fps']:.0f} | {'yes' if r['solve'] else 'no'} | {r['frames']} / "
                      f"{r['expected']} | {r['solved']} ({r['skipped']}) | {r['p50']:.2f} | {r['p99']:.2f} | {r['late']} |")
     lines += ["", f"Highest rate sustained by the pipeline without the solve at 4 motes: {best} fps "
-              "(tried 60, 120, 180, 240, 360).", "Targets: p50 <= 5 ms, p99 <= 15 ms at 4 x 60.", ""]
-    text = "\n".join(lines)
-    print(text)
+              "(tried 60, 120, 180, 240, 360).", "Targets: p50 <= 5 ms, p99 <= 15 ms at 4 x 60."]
+    print("\n".join(lines))
     if not args.no_write:
-        path = ROOT / "docs" / "BENCHMARKS.md"
-        old = path.read_text() if path.exists() else "# Benchmarks\n\n"
-        start = old.find("## Server latency")
-        if start >= 0:
-            end = old.find("\n## ", start + 1)
-            old = old[:start] + (old[end + 1:] if end >= 0 else "")
-        path.write_text(old.rstrip() + "\n\n" + text)
+        from _record import record
+
+        record("Server latency (benchmarks/latency.py)", lines)
     return 0
 
 

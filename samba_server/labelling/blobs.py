@@ -15,7 +15,17 @@ import numpy as np
 
 from samba_common.wire import FLAG_LOST, FLAG_MERGED, FLAG_PREDICTED, UNLABELLED
 
-__all__ = ["ViewBlobs", "view_blobs"]
+__all__ = ["ViewBlobs", "percentile", "view_blobs"]
+
+
+def percentile(x: np.ndarray, q: float) -> float:
+    """np.percentile(x, q) (linear interpolation) of a small 1-D array without NaN, about 20x
+    faster than numpy's general routine on the few values of one frame."""
+    s = np.sort(np.asarray(x, float))
+    pos = q / 100.0 * (len(s) - 1)
+    lo = int(pos)
+    hi = min(lo + 1, len(s) - 1)
+    return float(s[lo] + (pos - lo) * (s[hi] - s[lo]))
 
 
 @dataclass
@@ -60,7 +70,8 @@ def view_blobs(packet, merged_area_ratio: float = 1.5, max_blobs: int = 40) -> V
     flags, area, uv = flags[measured], area[measured], uv[measured]
     # one row per distinct blob: the tracker repeats a merged blob once per marker it holds
     key = np.round(uv * 1000.0).astype(np.int64)
-    _, first, inverse, count = np.unique(key, axis=0, return_index=True, return_inverse=True, return_counts=True)
+    key = key[:, 0] * (1 << 32) + key[:, 1]  # one integer per position (1-D unique is much faster)
+    _, first, inverse, count = np.unique(key, return_index=True, return_inverse=True, return_counts=True)
     inverse = inverse.reshape(-1)
     merged = np.zeros(len(first), bool)
     np.logical_or.at(merged, inverse, (flags & FLAG_MERGED) != 0)
@@ -73,7 +84,7 @@ def view_blobs(packet, merged_area_ratio: float = 1.5, max_blobs: int = 40) -> V
     hint[hint == -2] = -1
     a = area[first]
     if len(a) >= 4:
-        merged |= a >= merged_area_ratio * float(np.percentile(a, 40))
+        merged |= a >= merged_area_ratio * percentile(a, 40.0)
     if len(first) > max_blobs:
         keep = np.sort(np.argsort(a, kind="stable")[:max_blobs])
         first, merged, hint, a = first[keep], merged[keep], hint[keep], a[keep]

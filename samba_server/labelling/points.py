@@ -32,7 +32,7 @@ import numpy as np
 from samba_common.calib import CameraRig
 
 from ..triangulate import Triangulator
-from .blobs import ViewBlobs
+from .blobs import ViewBlobs, percentile
 
 __all__ = ["PointsConfig", "Points3D", "PointReconstructor"]
 
@@ -236,7 +236,10 @@ class PointReconstructor:
         solid = n_views[idx] >= 3  # the reference size comes from points that are surely markers
         if solid.sum() >= 4:
             med = np.nanmedian(size, axis=0)
-            merged_all = med >= cfg.double_size_ratio * float(np.nanpercentile(med[solid], 40))
+            ref = med[solid]
+            ref = ref[np.isfinite(ref)]
+            if ref.size:
+                merged_all = med >= cfg.double_size_ratio * percentile(ref, 40.0)
         return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing[idx].astype(np.int64), blob,
                         votes, n_merged > 0, merged_all, n_merged)
 
