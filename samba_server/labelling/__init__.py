@@ -7,12 +7,12 @@ The data path of one frame (:class:`~samba_server.labelling.labeller.Labeller`):
 2. :mod:`.points` — correspondences across views with epipolar gating on undistorted
    coordinates, candidates triangulated from >= 2 views, support gathered from every other
    view, ghosts rejected, a merged blob allowed to stand for two markers;
-3. :mod:`.assign` — the 3D points named as the 8 markers by an optimal assignment against
-   the predicted markers, checked against what is rigid for this subject;
+3. :mod:`.labeller` — the points named as the 8 markers by an optimal assignment against the
+   predicted markers, checked against what is rigid for this subject (:mod:`.rigid`), markers
+   left out recovered from the free points;
 4. :mod:`.identify` — acquisition and recovery from the 3D points alone (the standard pose in
-   any stance, or any pose after a blackout), enumerating the labellings the subject's
-   rigid lengths allow and choosing by geometry, facing, recent motion and the
-   reconstruction's fit.
+   any stance, or any pose after a blackout), enumerating the labellings the subject's rigid
+   lengths allow and choosing by geometry, anatomy, facing and recent motion.
 """
 
 from .labeller import Labeller, LabelConfig, LabelQuality

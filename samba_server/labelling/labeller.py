@@ -7,13 +7,15 @@
    recently, else the reconstructed skeleton's joint, which the solver keeps moving with the
    body) and the points are named by an optimal assignment (Hungarian) of points to predicted
    markers within a gate that grows with the time since the marker was seen. The motes' labels
-   lower the cost of agreeing assignments a little: evidence, not orders. Assignments that break
-   a rigid distance of the subject (:mod:`.rigid`) or flip the facing in one frame are dropped;
+   lower the cost of agreeing assignments a little: evidence, not orders. Crossed legs are
+   swapped back; assignments that break a rigid distance of the subject (:mod:`.rigid`) or turn
+   the facing faster than a body turns are dropped; markers left out are recovered from the
+   free points where their prediction or the rigid lengths put them, when the choice is clear;
 3. **identification** (:mod:`.identify`) when fewer than ``min_tracked`` markers can be
    predicted (the start of a take, after a blackout or once the subject left the volume), or
    when tracking explains too few of the points for ``lost_after`` s (a jump): the points are
-   named from scratch, the labelling accepted at once when its margin is clear, else after
-   ``max_wait`` s with the best one.
+   named from scratch: at once when the best labelling's margin is clear, else the markers the
+   close runner-ups agree on, else (no shoulders) after ``max_wait`` s the best one.
 
 Every frame gets a :class:`LabelQuality`. All decisions depend only on the frame's packets,
 its time and what the server fed back (solved joints, body lengths), so a replay gives the
@@ -56,7 +58,7 @@ class LabelConfig:
     unexplained_m: float = 0.03  #: a 2-view point costs this much more per view that should have seen it
     merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
-    recover_margin_m: float = 0.10  #: ... when no other free point is within this much more
+    recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
     max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast (plus 45 degrees) between labellings
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
@@ -258,7 +260,7 @@ class Labeller:
         out[assign >= 0] = pts.X[assign[assign >= 0]]
         right = None
         if self._facing is not None and t - self._t_facing <= 0.5:
-            right = np.array([self._facing[1], -self._facing[0], 0.0])
+            right = _right(self._facing)
         if right is not None:
             # legs do not cross: a right knee (ankle) well to the left of the left one is a swap
             for lm, rm in ((LK, RK), (LA, RA)):
@@ -306,11 +308,11 @@ class Labeller:
 
         A point that is surely a marker (>= 3 views, or no view missing it) is a candidate for a
         marker within ``recover_gate_m`` of its prediction; it, or a 2-view point that one
-        other view misses, is a candidate where
-        the named markers put it: a shoulder a shoulder width from the other along the
-        subject's right, a knee a shin above its ankle, an ankle a shin below its knee. The
-        candidates are assigned optimally; a pair is kept when no other candidate point is
-        nearly as good and the marker's rigid distances hold. assign, arow (8,) in place."""
+        other view misses, is a candidate where the named markers put it: a shoulder a shoulder
+        width from the other along the subject's right, a knee a shin above its ankle, an ankle
+        a shin below its knee. The candidates are assigned optimally; a pair is kept when the
+        best assignment without it costs ``recover_margin_m`` more and the marker's rigid
+        distances hold. assign, arow (8,) in place."""
         cfg = self.config
         body = self._body
         named = np.full((N_MARKERS, 3), np.nan)
@@ -325,7 +327,7 @@ class Labeller:
         # rigid lengths only, at a higher cost
         doubt = np.where((pts.n_views[free] < 3) & (pts.unexplained[free] > 0), cfg.unexplained_m, 0.0)
         cost = np.full((len(free), len(lost)), np.inf)
-        right = None if self._facing is None else np.array([self._facing[1], -self._facing[0], 0.0])
+        right = None if self._facing is None else _right(self._facing)
         for j, m in enumerate(lost):
             if np.isfinite(pred[m]).all():
                 d = np.linalg.norm(X - pred[m], axis=1)
@@ -359,8 +361,8 @@ class Labeller:
             r, k = linear_sum_assignment(c)
             return float(c[r, k].sum())
 
-        best = total(full)
         rows, cols = linear_sum_assignment(full)
+        best = float(full[rows, cols].sum())
         for r, c in sorted(zip(rows, cols), key=lambda rc: full[rc]):
             if r >= nf or c >= nl or not np.isfinite(cost[r, c]):
                 continue
@@ -415,7 +417,7 @@ class Labeller:
         out = np.full((N_MARKERS, 3), np.nan)
         named = labels >= 0
         out[named] = pts.X[labels[named]]
-        right = np.array([best.facing[1], -best.facing[0], 0.0])
+        right = _right(best.facing)
         _split_shared(out, labels, np.zeros((N_MARKERS, 3)), cfg.merged_half_m, right)
         self.stats.identifications += 1
         if self.stats.first_identified_t is None:
@@ -501,6 +503,11 @@ def _two_in_one(pts: Points3D, p: int) -> bool:
     """Point p may hold two markers: its blobs are double-sized everywhere, or merged in all
     its views but at most one."""
     return bool(pts.merged_all[p]) or (pts.n_merged[p] >= 2 and pts.n_merged[p] >= pts.n_views[p] - 1)
+
+
+def _right(facing: np.ndarray) -> np.ndarray:
+    """(3,) horizontal unit vector to the subject's right of a (2,) unit facing (right = facing x up)."""
+    return np.array([facing[1], -facing[0], 0.0])
 
 
 def _facing(left: np.ndarray, right: np.ndarray) -> np.ndarray | None:

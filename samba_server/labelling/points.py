@@ -256,15 +256,15 @@ class PointReconstructor:
                 if len(sure) < 2:
                     continue  # shared with a 2-view point, which may be a ghost: keep the view
                 for k in sure:
-                    if n_views[k] >= 3:
-                        keep_blob = blob[:, k].copy()
-                        if self._reduce(int(k), [c], X, err, n_views, blob, uv):
-                            blob[:, k] = keep_blob
+                    keep_blob = blob[:, k].copy()
+                    if self._reduce(int(k), [c], X, err, n_views, blob, uv):
+                        blob[:, k] = keep_blob
 
     def _reduce(self, k: int, drop: list[int], X: np.ndarray, err: np.ndarray, n_views: np.ndarray,
                 blob: np.ndarray, uv: np.ndarray) -> bool:
         """Triangulate candidate k again without the views ``drop``; update X, err, n_views and
-        blob in place. False when the rest does not make a point (too few views, too large an error)."""
+        blob in place. False when the rest does not make a point (fewer than 2 views left after the
+        triangulator's outlier test, or outside the capture volume)."""
         sub = uv[:, k:k + 1].copy()
         sub[drop] = np.nan
         sub[blob[:, k] < 0] = np.nan
