@@ -66,7 +66,7 @@ def main() -> int:
     rng = np.random.default_rng(args.seed)
     cfg = ReconstructConfig(k=args.k, pseudo=args.pseudo)
     rows, all_err, unobs_err, sig, mean_err, ms, walks = [], [], [], [], [], [], []
-    skin_all, skin_unobs, off_leg, off_arm, skin_ms = [], [], [], [], []
+    skin_all, skin_unobs, off_leg, off_arm, skin_ms, off_z = [], [], [], [], [], []
     for subject, clips in sorted(by_subject.items()):
         others = [f for f in files if f not in clips]
         db = build_db(others, fps=args.fps)
@@ -89,6 +89,7 @@ def main() -> int:
                 subject = calibrate_subject(skin, t, db, cfg, iterations=args.calib_iterations).subject
                 est_s, info_s = reconstruct_take(skin, t, db, cfg, lengths=subject.lengths, offsets=subject.offsets)
                 err = np.abs(subject.offsets - true_off)
+                off_z.append(err / subject.offsets_sigma)  # (8, 3): error in reported sigmas
                 skin_all.append(mpjpe(est_s, truth))
                 skin_unobs.append(mpjpe(est_s, truth, UNOBSERVED_JOINTS))
                 off_leg.append(err[4:].max())
@@ -128,6 +129,10 @@ def main() -> int:
             f"- recovered offsets vs truth, worst component per take, mean over takes: legs "
             f"**{1000 * np.mean(off_leg):.1f} mm** (target <= 5), arms **{1000 * np.mean(off_arm):.1f} mm** "
             f"(target <= 10); skin solve {np.mean(skin_ms):.2f} ms/frame",
+            f"- reported offset sigma vs true error over all takes and components: rms(error / sigma) "
+            f"**{np.sqrt(np.mean(np.square(off_z))):.2f}** (1 = honest), within 1 sigma "
+            f"{100 * np.mean(np.array(off_z) <= 1):.0f} %, within 2 sigma {100 * np.mean(np.array(off_z) <= 2):.0f} % "
+            f"(Gaussian: 68 / 95 %)",
         ]
     if walks:
         w = np.array(walks)

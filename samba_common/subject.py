@@ -60,9 +60,12 @@ class Subject:
 
     def metadata(self) -> dict[str, np.ndarray]:
         """Arrays to carry into joints.npz / exports: subject_lengths (8,), subject_offsets (8, 3),
-        subject_placement (str)."""
-        return {"subject_lengths": self.lengths, "subject_offsets": self.offsets,
-                "subject_placement": np.array(self.placement)}
+        subject_placement (str), and subject_offsets_sigma (8, 3) when known (metres)."""
+        out = {"subject_lengths": self.lengths, "subject_offsets": self.offsets,
+               "subject_placement": np.array(self.placement)}
+        if self.offsets_sigma is not None:
+            out["subject_offsets_sigma"] = self.offsets_sigma
+        return out
 
     def to_toml(self) -> str:
         """The subject as ``subject.toml`` text."""
@@ -117,9 +120,18 @@ def load_subject(path: str | os.PathLike) -> Subject:
     """Read and validate ``subject.toml``. Raises SubjectError naming the file and key."""
     try:
         with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+            text = fh.read().decode("utf-8")
     except OSError as exc:
         raise SubjectError(f"{path}: cannot read: {exc.strerror or exc}") from None
+    except UnicodeDecodeError:
+        raise SubjectError(f"{path}: not UTF-8 text") from None
+    return load_subject_text(text, path)
+
+
+def load_subject_text(text: str, path: str | os.PathLike = "<subject>") -> Subject:
+    """Validate ``subject.toml`` text (e.g. recorded in a take); ``path`` names it in errors."""
+    try:
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise SubjectError(f"{path}: not valid TOML: {exc}") from None
     table = data.get("subject")
@@ -141,3 +153,19 @@ def load_subject(path: str | os.PathLike) -> Subject:
         raise SubjectError(f"{path}: subject.offsets must be metres within 0.25 m of the joint, got {offsets.max():.3g}")
     sigma = _table(path, table, "offsets_sigma", MARKER_NAMES, 3, required=False)
     return Subject(lengths, offsets, sigma, placement)
+
+
+def subject_from_metadata(extra: dict) -> Subject | None:
+    """The subject carried in a joints.npz's extra keys (``subject_lengths``, ``subject_offsets``,
+    ``subject_placement``), or None when absent or malformed."""
+    if "subject_lengths" not in extra:
+        return None
+    try:
+        placement = str(np.asarray(extra.get("subject_placement", "skin")))
+        offsets = extra.get("subject_offsets")
+        sigma = extra.get("subject_offsets_sigma")
+        return Subject(np.asarray(extra["subject_lengths"], float),
+                       np.zeros((N_MARKERS, 3)) if offsets is None else np.asarray(offsets, float),
+                       None if sigma is None else np.asarray(sigma, float), placement)
+    except (ValueError, TypeError):
+        return None

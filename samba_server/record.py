@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mcap.exceptions import McapError
-from mcap.records import Channel, Footer, Message, Schema
+from mcap.records import Channel, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
@@ -93,14 +93,21 @@ def _layout_doc(module: str, fallback: str) -> bytes:
 EVENT_JSONSCHEMA = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
     "title": "samba.Event",
-    "description": "A mote joined or left the session (Zenoh liveliness), as seen by the server.",
+    "description": "A mote joined or left the session (Zenoh liveliness), as seen by the server; or the "
+                   "subject (bone lengths + skin-marker offsets) the solver uses from pose seq on changed.",
     "type": "object",
     "properties": {
-        "mote_id": {"type": "string", "description": "the mote (camera) id"},
-        "event": {"type": "string", "enum": ["join", "leave"]},
+        "mote_id": {"type": "string", "description": "the mote (camera) id (join, leave)"},
+        "event": {"type": "string", "enum": ["join", "leave", "subject"]},
         "t_ns": {"type": "integer", "description": "server time, ns since the Unix epoch"},
+        "seq": {"type": "integer", "description": "subject: first pose seq solved with it"},
+        "subject_toml": {"type": "string", "description": "subject: the subject.toml text (docs/formats.md)"},
     },
-    "required": ["mote_id", "event", "t_ns"],
+    "required": ["event", "t_ns"],
+    "allOf": [
+        {"if": {"properties": {"event": {"enum": ["join", "leave"]}}}, "then": {"required": ["mote_id"]}},
+        {"if": {"properties": {"event": {"const": "subject"}}}, "then": {"required": ["seq", "subject_toml"]}},
+    ],
 }
 
 
@@ -473,6 +480,19 @@ class Recorder:
         """Record one JSON event (mote join/leave)."""
         return self._add(EVENTS_TOPIC, "json", {}, payload, t_ns, t_ns, 0)
 
+    def write_metadata(self, name: str, data: dict[str, str]) -> bool:
+        """Add an MCAP metadata record ``name`` now (e.g. the subject measured live); continuation
+        files start with it too. False if the file is closed or in a write gap."""
+        with self._lock:
+            self._metadata = {**(self._metadata or {}), **{f"{name}.{k}": v for k, v in data.items()}}
+            if self._closed or self._gap:
+                return False
+            try:
+                self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+            except OSError:
+                return False
+            return self._write_out()
+
     def close(self) -> None:
         """Write the last chunk and the MCAP summary, close the file (idempotent)."""
         with self._lock:
@@ -551,6 +571,8 @@ class TakeReader:
         self.truncated = False
         self.error = ""
         self.channels: dict[int, Channel] = {}
+        #: MCAP metadata records read so far, by name (a later record of a name replaces it)
+        self.metadata: dict[str, dict[str, str]] = {}
 
     def __iter__(self) -> Iterator[RecordedMessage]:
         with self.path.open("rb") as fh:
@@ -579,6 +601,8 @@ class TakeReader:
                         continue
                     yield RecordedMessage(ch.topic, rec.log_time, rec.publish_time, rec.sequence,
                                           bytes(rec.data), dict(ch.metadata))
+                elif isinstance(rec, Metadata):
+                    self.metadata[rec.name] = dict(rec.metadata)
                 elif isinstance(rec, Footer):
                     seen_footer = True
                 elif isinstance(rec, Schema):
@@ -591,3 +615,16 @@ class TakeReader:
 def iter_messages(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Iterator[RecordedMessage]:
     """Messages of the take at ``path`` in file order (see :class:`TakeReader`)."""
     return iter(TakeReader(path, topics))
+
+
+def recorded_subjects(path: str | Path) -> list[tuple[int, str]]:
+    """Every subject event of a take: (first pose seq, subject.toml text), in order."""
+    out = []
+    for m in TakeReader(path, topics=[EVENTS_TOPIC]):
+        try:
+            ev = json.loads(m.data)
+        except ValueError:
+            continue
+        if isinstance(ev, dict) and ev.get("event") == "subject" and isinstance(ev.get("subject_toml"), str):
+            out.append((int(ev.get("seq", 0)), ev["subject_toml"]))
+    return out

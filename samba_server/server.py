@@ -108,6 +108,7 @@ class Server:
         self.last_arrival_ns = 0
         self._t0_ns: int | None = None
         self._unknown_logged: set[str] = set()
+        self._subject_version = getattr(reconstructor, "subject_version", 0)
         #: callables(MarkerPacket) called with every decoded packet (e.g. the viewer's blobs)
         self.packet_listeners: list[Callable] = []
         #: callables(PoseMessage) called with every pose after ``publish``
@@ -117,6 +118,35 @@ class Server:
         self.skip_seqs: set[int] | None = None
         if recorder is not None:
             recorder.write_calibration(self.calibration_toml, clock())
+
+    # ------------------------------------------------------------------ subject
+    @property
+    def subject(self):
+        """The subject (samba_common.subject.Subject) the solver uses now, or None (not known yet)."""
+        return getattr(self.reconstructor, "subject", None)
+
+    def _record_subject(self, recorder: Recorder, t_ns: int) -> None:
+        """Write the current subject into ``recorder``: an event on /events (with the first pose
+        seq solved with it) and the MCAP metadata record ``samba.subject``."""
+        subject = self.subject
+        if subject is None:
+            return
+        toml = subject.to_toml()
+        ev = {"event": "subject", "t_ns": int(t_ns), "seq": self._seq, "subject_toml": toml}
+        recorder.write_event(json.dumps(ev).encode(), int(t_ns))
+        recorder.write_metadata("samba.subject", {"subject_toml": toml, "seq": str(self._seq),
+                                                  "placement": subject.placement})
+
+    def _check_subject(self, t_ns: int) -> None:
+        """After a solve: a subject measured live (or refined) is logged and recorded."""
+        version = getattr(self.reconstructor, "subject_version", 0)
+        if version == self._subject_version:
+            return
+        self._subject_version = version
+        log.info("subject in use from pose %d: %s", self._seq, self.subject.placement if self.subject else None)
+        recorder = self.recorder
+        if recorder is not None:
+            self._record_subject(recorder, t_ns)
 
     # ------------------------------------------------------------------ thread-safe inputs
     def ingest(self, mote_id: str, payload: bytes, arrival_ns: int | None = None) -> bool:
@@ -256,6 +286,7 @@ class Server:
                 residual = float(r.residual)
             except Exception:
                 log.exception("solver failed on frame t=%.3f s (frame left unsolved)", t)
+            self._check_subject(frame.t_ns)
             if np.isfinite(joints).all():
                 flags |= FLAG_SOLVED
                 self.stats.solved += 1
@@ -296,7 +327,9 @@ class Server:
         with self._lock:
             old, self.recorder = self.recorder, recorder
             if recorder is not None:
-                recorder.write_calibration(self.calibration_toml, self.clock())
+                now = self.clock()
+                recorder.write_calibration(self.calibration_toml, now)
+                self._record_subject(recorder, now)
         return old
 
     def report(self) -> dict:

@@ -14,7 +14,7 @@ from samba_common.progress import Progress
 from samba_server.activity import MoteActivity
 from samba_server.app import add_network_args, export_joints, load_server_configs, make_reconstructor, setup_logging
 from samba_server.record import TakeReader
-from samba_server.replay import Player, replay_into, take_calibration
+from samba_server.replay import Player, replay_into, take_calibration, take_subject
 from samba_server.server import Server, ServerConfig
 
 
@@ -49,7 +49,8 @@ def main(argv: list[str] | None = None) -> int:
                 return 1
             rig = CameraRig.loads(toml, path=args.calibration or f"{args.take} (its recorded calibration)")
             cfg = load_server_configs(args.config)
-            server = Server(rig, toml, make_reconstructor(args.db, cfg.reconstruct),
+            subject = take_subject(args.take)  # recorded with --subject: solve with it again
+            server = Server(rig, toml, make_reconstructor(args.db, cfg.reconstruct, subject),
                             ServerConfig(**{**cfg.server.__dict__, "max_lag_ms": 0.0}), cfg.sync, cfg.triangulate,
                             label_config=cfg.labelling)
             activity = MoteActivity(rig.names)

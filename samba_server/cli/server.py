@@ -20,7 +20,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--db", help="motion database (.npz) for the solver (default: the shipped one)")
     ap.add_argument("--subject", metavar="SUBJECT.toml",
                     help="subject (bone lengths + skin-marker offsets) from samba-subject calibrate; default: "
-                         "bone lengths measured from the standard pose, markers on the joint centres")
+                         "measured live: the standard pose tells skin landmarks from joint centres and gives "
+                         "the bone lengths, skin offsets are calibrated from the first second after it "
+                         "([reconstruct] placement, subject_seconds)")
     ap.add_argument("--config", help="server TOML (default: the packaged configs/server.toml)")
     ap.add_argument("--fps", type=float, help="nominal mote frame rate (overrides [sync] fps)")
     ap.add_argument("--http", metavar="[HOST:]PORT", help="serve the browser viewer")

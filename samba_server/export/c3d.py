@@ -12,7 +12,9 @@ take, about a frame or more when the take has gaps). No parameter grows with the
 frames (a C3D parameter dimension is one byte and a parameter at most 32 KiB), so a take of
 any length reads back. ``SAMBA:SOURCE`` is the source file name. Takes of more than 65535
 frames also get ``TRIAL:ACTUAL_START_FIELD`` / ``ACTUAL_END_FIELD`` (the header's frame
-count is 16-bit). docs/exports.md lists every parameter.
+count is 16-bit). The subject the take was solved with (placement, bone lengths, marker
+offsets) is in ``SAMBA:SUBJECT_PLACEMENT``, ``BONE_LENGTHS``, ``MARKER_OFFSETS`` and friends
+(:func:`add_subject_parameters`). docs/exports.md lists every parameter.
 """
 
 from __future__ import annotations
@@ -23,7 +25,8 @@ import sys
 
 import numpy as np
 
-from samba_common.skeleton import JOINT_NAMES, MARKER_NAMES
+from samba_common.skeleton import BONE_TYPES, JOINT_NAMES, MARKER_NAMES
+from samba_common.subject import Subject
 
 from .take import ExportTake
 
@@ -69,6 +72,20 @@ def _int_parameter(c, group: str, name: str, words: list[int], description: str)
     c["parameters"][group][name]["value"] = np.array([w - 65536 if w > 32767 else w for w in words])
 
 
+def add_subject_parameters(c, subject: Subject) -> None:
+    """The subject the take was solved with, as SAMBA parameters (docs/exports.md): placement,
+    bone types and lengths (mm), marker names and offsets (3, 8) mm in each marker's segment
+    frame (e1, e2, e3; samba_common.markerset), and their 1-sigma when known."""
+    c.add_parameter("SAMBA", "SUBJECT_PLACEMENT", [subject.placement], "markers on skin landmarks or joint centres")
+    c.add_parameter("SAMBA", "BONE_TYPES", list(BONE_TYPES), "bone types of BONE_LENGTHS")
+    c.add_parameter("SAMBA", "BONE_LENGTHS", [float(v) for v in 1000.0 * subject.lengths], "subject bone lengths (mm)")
+    c.add_parameter("SAMBA", "OFFSET_MARKERS", list(MARKER_NAMES), "markers of MARKER_OFFSETS")
+    c.add_parameter("SAMBA", "MARKER_OFFSETS", 1000.0 * subject.offsets.T,
+                    "marker - joint centre (mm) in the segment frame (e1, e2, e3), one column per marker")
+    if subject.offsets_sigma is not None:
+        c.add_parameter("SAMBA", "OFFSET_SIGMA", 1000.0 * subject.offsets_sigma.T, "1-sigma of MARKER_OFFSETS (mm)")
+
+
 def write_c3d(path: str | os.PathLike, take: ExportTake) -> int:
     """Write a C3D file; returns the number of points per frame."""
     import ezc3d  # heavy native import: only when exporting C3D
@@ -92,6 +109,8 @@ def write_c3d(path: str | os.PathLike, take: ExportTake) -> int:
     c.add_parameter("SAMBA", "T0", [t0], "time of the first frame (s); frame i is at T0 + i / POINT:RATE")
     c.add_parameter("SAMBA", "T_ERROR", [t_error], "max |samba time stamp - (T0 + i / POINT:RATE)| (s)")
     c.add_parameter("SAMBA", "SOURCE", [os.path.basename(take.source) or "samba"], "source take file")
+    if take.subject is not None:
+        add_subject_parameters(c, take.subject)
     if F > HEADER_MAX_FRAMES:
         # Vicon's convention for long trials: two 16-bit words (low, high) of the frame number
         _int_parameter(c, "TRIAL", "ACTUAL_START_FIELD", [1, 0], "first frame")

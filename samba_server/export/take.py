@@ -16,6 +16,7 @@ import numpy as np
 
 from samba_common.formats import load_joints, load_markers
 from samba_common.skeleton import JOINT_NAMES, MARKER_NAMES
+from samba_common.subject import Subject, SubjectError, load_subject_text, subject_from_metadata
 
 log = logging.getLogger(__name__)
 
@@ -27,12 +28,15 @@ class TakeError(ValueError):
 @dataclass
 class ExportTake:
     """joints: (F, 13, 3) world metres Z up (NaN rows = unsolved frames); t: (F,) seconds;
-    markers: (F, 8, 3) world metres NaN = unseen, or None when the take has no markers."""
+    markers: (F, 8, 3) world metres NaN = unseen, or None when the take has no markers;
+    subject: the bone lengths and marker offsets the take was solved with (the last one of a
+    recording), or None when the file does not say."""
 
     joints: np.ndarray
     t: np.ndarray
     markers: np.ndarray | None = None
     source: str = ""
+    subject: Subject | None = None
 
     @property
     def n_frames(self) -> int:
@@ -73,7 +77,7 @@ def load_take(path: str | os.PathLike, markers_path: str | os.PathLike | None = 
         markers = jt.extra.get("markers")
         if markers is not None:
             markers = np.asarray(markers, dtype=np.float64)
-        take = ExportTake(jt.joints, jt.t, markers, str(p))
+        take = ExportTake(jt.joints, jt.t, markers, str(p), subject_from_metadata(jt.extra))
     if markers_path is not None:
         mt = load_markers(markers_path)
         if mt.markers.shape[0] != take.n_frames:
@@ -119,7 +123,28 @@ def _load_mcap(p: Path) -> ExportTake:
         raise TakeError(f"{p}: the recording holds no poses (was the server solving?)")
     order = np.argsort(t_ns, kind="stable")
     t = (t_ns[order] - t_ns[order[0]]) / 1e9
-    return ExportTake(joints[order], t, markers[order], str(p))
+    return ExportTake(joints[order], t, markers[order], str(p), _mcap_subject(p))
+
+
+def _mcap_subject(p: Path) -> Subject | None:
+    """The last subject recorded in a take (an event when measured live, else the ``--subject``
+    of the ``samba`` metadata record), or None."""
+    from samba_server import record
+
+    events = record.recorded_subjects(p)
+    text = events[-1][1] if events else None
+    if text is None:
+        reader = record.TakeReader(p, topics=[record.CALIBRATION_TOPIC])
+        for _m in reader:
+            break
+        text = reader.metadata.get("samba", {}).get("subject_toml")
+    if not text:
+        return None
+    try:
+        return load_subject_text(text, f"{p} (recorded subject)")
+    except SubjectError as exc:
+        log.warning("%s", exc)
+        return None
 
 
 def fill_invalid(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

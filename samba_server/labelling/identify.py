@@ -27,7 +27,7 @@ import numpy as np
 
 from .rigid import LA, LK, LS, LW, RA, RK, RS, RW, Body
 
-__all__ = ["Hint", "Hypothesis", "identify"]
+__all__ = ["Hint", "Hypothesis", "identify", "score_labels"]
 
 _UP = np.array([0.0, 0.0, 1.0])
 #: a right knee (ankle) less than _LATERAL_M m to the subject's right of the left one costs
@@ -45,12 +45,21 @@ class Hint:
     """What is known about the subject besides the points.
 
     facing: (2,) unit horizontal facing direction, or None; facing_weight: how much it counts;
-    velocity: (3,) m/s of the body's centre over the last frames, or None.
+    velocity: (3,) m/s of the body's centre over the last frames, or None; labels: (8,) point
+    per marker that tracking named (-1 = none), each agreeing name adding labels_weight.
     """
 
     facing: np.ndarray | None = None
     facing_weight: float = 0.0
     velocity: np.ndarray | None = None
+    labels: np.ndarray | None = None
+    labels_weight: float = 0.0
+
+    def agree(self, marker: int, point: int) -> float:
+        """Bonus for naming point as marker when tracking did too."""
+        if self.labels is None or point < 0:
+            return 0.0
+        return self.labels_weight if self.labels[marker] == point else 0.0
 
 
 @dataclass
@@ -67,30 +76,101 @@ def _unit2(v: np.ndarray) -> np.ndarray | None:
     return None if n < 1e-6 else np.array([v[0], v[1]]) / n
 
 
+def _leg_penalty(X: np.ndarray, s: np.ndarray, k: int, a: int, body: Body) -> float | None:
+    """Penalty of knee point k and ankle point a (-1 = unnamed) for the side whose shoulder is
+    at s (3,), or None when the rigid lengths do not allow them."""
+    reach_k = body.trunk + 2 * body.tol
+    reach_a = reach_k + body.shin
+    if k < 0:
+        if a < 0:
+            return 0.0
+        return 0.0 if np.linalg.norm(X[a] - s) <= reach_a and X[a, 2] < s[2] - 0.6 else None
+    dk = float(np.linalg.norm(X[k] - s))
+    if dk > reach_k or X[k, 2] > s[2] - 0.2:
+        return None
+    # the knee hangs about a trunk (torso + thigh) below its shoulder: much nearer takes a
+    # deep crouch, or a wrist taken for the shoulder
+    near = min(2.0, _NEAR_W * max(0.0, _NEAR_F * body.trunk - dk))
+    if a < 0:
+        return near
+    if a == k or X[a, 2] > X[k, 2] + 0.1:
+        return None
+    err = body.shin_error(X[k], X[a])
+    if err > body.tol or np.linalg.norm(X[a] - s) > reach_a:
+        return None
+    return near + 0.3 * (err / body.tol) ** 2
+
+
 def _leg_options(X: np.ndarray, free: list[int], s: np.ndarray, body: Body) -> list[tuple[int, int, float]]:
     """(knee, ankle, penalty) options for the side whose shoulder is at s: pairs a shin apart,
     single points, or nothing."""
     out: list[tuple[int, int, float]] = [(-1, -1, 0.0)]
-    reach_k = body.trunk + 2 * body.tol
-    reach_a = reach_k + body.shin
     for k in free:
-        dk = float(np.linalg.norm(X[k] - s))
-        if dk > reach_k or X[k, 2] > s[2] - 0.2:
+        pen_k = _leg_penalty(X, s, k, -1, body)
+        if pen_k is None:
             continue
-        # the knee hangs about a trunk (torso + thigh) below its shoulder: much nearer takes a
-        # deep crouch, or a wrist taken for the shoulder
-        near = min(2.0, _NEAR_W * max(0.0, _NEAR_F * body.trunk - dk))
-        out.append((k, -1, near))
+        out.append((k, -1, pen_k))
         for a in free:
-            if a == k or X[a, 2] > X[k, 2] + 0.1:
-                continue
-            err = body.shin_error(X[k], X[a])
-            if err <= body.tol and np.linalg.norm(X[a] - s) <= reach_a:
-                out.append((k, a, near + 0.3 * (err / body.tol) ** 2))
+            pen = _leg_penalty(X, s, k, a, body)
+            if pen is not None:
+                out.append((k, a, pen))
     for a in free:
-        if np.linalg.norm(X[a] - s) <= reach_a and X[a, 2] < s[2] - 0.6:
+        if _leg_penalty(X, s, -1, a, body) is not None:
             out.append((-1, a, 0.0))
     return out
+
+
+def _shoulders(X: np.ndarray, L: int, R: int, trust: np.ndarray, body: Body, hint: Hint) -> tuple[float, np.ndarray] | None:
+    """(score, facing (2,)) of points L, R as the left and right shoulders, or None when they
+    cannot be."""
+    zs = X[:, 2]
+    if min(zs[L], zs[R]) < 0.6 or abs(zs[L] - zs[R]) > 0.35 or body.width_error(X[L], X[R]) > body.tol:
+        return None
+    f = _unit2(np.cross(_UP, X[R] - X[L]))
+    if f is None:
+        return None
+    base = 2.0 - 0.3 * (body.width_error(X[L], X[R]) / body.tol) ** 2 - trust[L] - trust[R]
+    base -= _TILT_W * max(0.0, abs(float(X[L, 2] - X[R, 2])) - _TILT_M)  # shoulders stay level
+    base += hint.agree(LS, L) + hint.agree(RS, R)
+    if hint.facing is not None:
+        base -= hint.facing_weight * (1.0 - float(f @ hint.facing))
+    if hint.velocity is not None and np.hypot(*hint.velocity[:2]) > 0.5:
+        v = hint.velocity[:2] / np.hypot(*hint.velocity[:2])
+        base -= 1.5 * max(0.0, -float(f @ v) - 0.2)
+    return base, f
+
+
+def _legs_score(X: np.ndarray, trust: np.ndarray, L: int, R: int, left: tuple[int, int, float],
+                right: tuple[int, int, float], f: np.ndarray, shared: np.ndarray,
+                hint: Hint) -> tuple[float, int, int, int, int] | None:
+    """(score, kl, al, kr, ar) of one leg option per side (from :func:`_leg_options`), or None
+    when they use a point twice."""
+    kl, al, pl = left
+    kr, ar, pr = right
+    used = [p for p in (kl, al, kr, ar) if p >= 0]
+    if len(set(used)) < len(used):
+        return None
+    r = np.array([f[1], -f[0]])  # the subject's right, horizontal
+    sc = len(used) - pl - pr - sum(trust[p] for p in used)
+    sc -= 2.0 * (_knee_bend(X, X[L], kl, al, f) + _knee_bend(X, X[R], kr, ar, f))
+    for a, b in ((kl, kr), (al, ar)):
+        if a >= 0 and b >= 0:
+            sc -= _LATERAL_W * max(0.0, _LATERAL_M - float((X[b] - X[a])[:2] @ r))
+    kl, kr = _share(kl, kr, shared)
+    al, ar = _share(al, ar, shared)
+    sc += (kl == kr >= 0) + (al == ar >= 0)  # a shared point names two markers
+    sc += hint.agree(LK, kl) + hint.agree(LA, al) + hint.agree(RK, kr) + hint.agree(RA, ar)
+    return sc, kl, al, kr, ar
+
+
+def _wrists_score(X: np.ndarray, trust: np.ndarray, L: int, R: int, a: int, b: int, f: np.ndarray,
+                  hint: Hint) -> float:
+    """Score of wrist points a, b (-1 = unnamed; each within reach of its shoulder)."""
+    s = sum(1.0 - trust[w] for w in (a, b) if w >= 0) + hint.agree(LW, a) + hint.agree(RW, b)
+    if a >= 0 and b >= 0:
+        r = np.array([f[1], -f[0]])
+        s -= 0.3 * max(0.0, -float((X[b] - X[a])[:2] @ r) - 0.1)
+    return s
 
 
 def _share(left: int, right: int, shared: np.ndarray) -> tuple[int, int]:
@@ -132,40 +212,17 @@ def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = N
         return []
     idx = list(np.argsort(trust, kind="stable")[:max_points])
     hyps: dict[tuple, Hypothesis] = {}
-    zs = X[:, 2]
     for i, j in combinations(idx, 2):
-        if min(zs[i], zs[j]) < 0.6 or abs(zs[i] - zs[j]) > 0.35 or body.width_error(X[i], X[j]) > body.tol:
-            continue
         for L, R in ((i, j), (j, i)):
-            f = _unit2(np.cross(_UP, X[R] - X[L]))
-            if f is None:
+            sh = _shoulders(X, L, R, trust, body, hint)
+            if sh is None:
                 continue
-            r = np.array([f[1], -f[0]])  # the subject's right, horizontal
-            base = 2.0 - 0.3 * (body.width_error(X[L], X[R]) / body.tol) ** 2 - trust[L] - trust[R]
-            base -= _TILT_W * max(0.0, abs(float(X[L, 2] - X[R, 2])) - _TILT_M)  # shoulders stay level
-            if hint.facing is not None:
-                base -= hint.facing_weight * (1.0 - float(f @ hint.facing))
-            if hint.velocity is not None and np.hypot(*hint.velocity[:2]) > 0.5:
-                v = hint.velocity[:2] / np.hypot(*hint.velocity[:2])
-                base -= 1.5 * max(0.0, -float(f @ v) - 0.2)
+            base, f = sh
             free = [p for p in idx if p not in (L, R)]
             legs_l = _leg_options(X, free, X[L], body)
             legs_r = _leg_options(X, free, X[R], body)
-            pairs = []
-            for kl, al, pl in legs_l:
-                for kr, ar, pr in legs_r:
-                    used = [p for p in (kl, al, kr, ar) if p >= 0]
-                    if len(set(used)) < len(used):
-                        continue
-                    sc = len(used) - pl - pr - sum(trust[p] for p in used)
-                    sc -= 2.0 * (_knee_bend(X, X[L], kl, al, f) + _knee_bend(X, X[R], kr, ar, f))
-                    for a, b in ((kl, kr), (al, ar)):
-                        if a >= 0 and b >= 0:
-                            sc -= _LATERAL_W * max(0.0, _LATERAL_M - float((X[b] - X[a])[:2] @ r))
-                    kl, kr = _share(kl, kr, shared)
-                    al, ar = _share(al, ar, shared)
-                    sc += (kl == kr >= 0) + (al == ar >= 0)  # a shared point names two markers
-                    pairs.append((sc, kl, al, kr, ar))
+            pairs = [p for p in (_legs_score(X, trust, L, R, ol, orr, f, shared, hint) for ol in legs_l for orr in legs_r)
+                     if p is not None]
             pairs.sort(key=lambda p: -p[0])
             for sc, kl, al, kr, ar in pairs[:legs_kept]:
                 taken = {L, R, kl, al, kr, ar}
@@ -176,12 +233,7 @@ def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = N
                     for b in wr:
                         if a >= 0 and a == b:
                             continue
-                        s = base + sc
-                        for w in (a, b):
-                            if w >= 0:
-                                s += 1.0 - trust[w]
-                        if a >= 0 and b >= 0:
-                            s -= 0.3 * max(0.0, -float((X[b] - X[a])[:2] @ r) - 0.1)
+                        s = base + sc + _wrists_score(X, trust, L, R, a, b, f, hint)
                         labels = np.full(8, -1, np.int64)
                         labels[[LS, RS, LW, RW, LK, RK, LA, RA]] = (L, R, a, b, kl, kr, al, ar)
                         key = tuple(labels)
@@ -189,3 +241,45 @@ def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = N
                             hyps[key] = Hypothesis(labels, float(s), f)
     out = sorted(hyps.values(), key=lambda h: -h.score)
     return out[:keep]
+
+
+def score_labels(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None, labels: np.ndarray,
+                 shared: np.ndarray | None = None) -> float | None:
+    """The score :func:`identify` gives a labelling (8,) of points X (M, 3) (-1 = unnamed;
+    both knees or both ankles may name one shared point), for comparing a tracked labelling
+    with a fresh identification: the best score of the labelling or of it with legs left out
+    (markers the rigid lengths rule out count as unnamed). None when the shoulders are not
+    both named or cannot be shoulders."""
+    shared = np.zeros(len(X), bool) if shared is None else np.asarray(shared, bool)
+    hint = hint or Hint()
+    L, R = int(labels[LS]), int(labels[RS])
+    if L < 0 or R < 0 or L == R:
+        return None
+    sh = _shoulders(X, L, R, trust, body, hint)
+    if sh is None:
+        return None
+    base, f = sh
+
+    def options(s: int, k: int, a: int) -> list[tuple[int, int, float]]:
+        out = []
+        for kk, aa in {(k, a), (k, -1), (-1, a), (-1, -1)}:
+            pen = _leg_penalty(X, X[s], kk, aa, body)
+            if pen is not None:
+                out.append((kk, aa, pen))
+        return out
+
+    kl, kr, al, ar = (int(labels[m]) for m in (LK, RK, LA, RA))
+    best = -np.inf
+    # a point named for both knees (ankles) is one side's, shared (identify names it so)
+    for kl_, kr_ in {(kl, kr if kr != kl else -1), (kl if kl != kr else -1, kr)}:
+        for al_, ar_ in {(al, ar if ar != al else -1), (al if al != ar else -1, ar)}:
+            for ol in options(L, kl_, al_):
+                for orr in options(R, kr_, ar_):
+                    p = _legs_score(X, trust, L, R, ol, orr, f, shared, hint)
+                    if p is not None:
+                        best = max(best, p[0])
+    reach = body.reach + body.tol
+    a, b = (int(labels[m]) for m in (LW, RW))
+    a = a if a >= 0 and a not in labels[[LS, RS, LK, RK, LA, RA]] and np.linalg.norm(X[a] - X[L]) <= reach else -1
+    b = b if b >= 0 and b != a and b not in labels[[LS, RS, LK, RK, LA, RA]] and np.linalg.norm(X[b] - X[R]) <= reach else -1
+    return float(base + best + _wrists_score(X, trust, L, R, a, b, f, hint))

@@ -36,7 +36,7 @@ from samba_common.skeleton import MARKER_JOINT, N_MARKERS
 
 from ..triangulate import Triangulator
 from .blobs import view_blobs
-from .identify import Hint, identify
+from .identify import Hint, identify, score_labels
 from .points import PointReconstructor, Points3D, PointsConfig
 from .rigid import LA, LK, LS, LW, RA, RK, RS, RW, Body
 
@@ -60,7 +60,8 @@ class LabelConfig:
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
-    max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast (plus 45 degrees) between labellings
+    max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast ...
+    turn_slack_deg: float = 45.0  #: ... plus this much (noise of the shoulder points) between labellings
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
     track_timeout: float = 0.12  #: a marker unseen for longer is predicted from the skeleton
     skeleton_max_age: float = 0.4  #: the skeleton predicts markers up to this long after the last solved pose
@@ -69,6 +70,9 @@ class LabelConfig:
     min_points: int = 4  #: points needed to identify
     min_margin: float = 0.6  #: an identification this much better than the runner-up is taken at once
     max_wait: float = 0.2  #: else the best one is taken after this long
+    audit_interval: float = 0.1  #: s: while tracking leaves a sure point unnamed, identify afresh this often (inf: never) ...
+    audit_margin: float = 1.0  #: ... and take the identification when it scores this much more than the tracked names
+    audit_agree: float = 0.3  #: score, per marker, of agreeing with a tracked name in that identification
     facing_weight: float = 3.0  #: weight of the known facing when identifying ...
     facing_decay: float = 1.0  #: ... decaying with this time constant since it was known
     first_facing_weight: float = 1.0  #: before any labelling: the standard pose faces +Y
@@ -99,8 +103,9 @@ class LabelQuality:
 @dataclass
 class LabelStats:
     """Counters of one run: frames, frames with >= 2 points, identifications (first and
-    re-acquisitions), overridden mote labels, and each re-acquisition's delay (s) from the
-    first frame with points after the labels were lost to the frame they came back."""
+    re-acquisitions), overridden mote labels, each re-acquisition's delay (s) from the
+    first frame with points after the labels were lost to the frame they came back, audits of
+    the tracked names by a fresh identification and how many of them replaced the names."""
 
     frames: int = 0
     frames_with_points: int = 0
@@ -108,6 +113,8 @@ class LabelStats:
     overridden: int = 0
     reacquire_s: list[float] = field(default_factory=list)
     first_identified_t: float | None = None
+    audits: int = 0
+    audit_switches: int = 0
 
 
 class Labeller:
@@ -132,6 +139,9 @@ class Labeller:
         self._t_lost: float | None = None  # first frame with points after the labels were lost
         self._t_ambiguous: float | None = None
         self._shared = np.zeros(N_MARKERS, bool)
+        self._assign = np.full(N_MARKERS, -1, np.int64)
+        self._t_audit = -np.inf
+        self._free_hist: list[tuple[float, np.ndarray]] = []  # (t, free sure points (F, 3)) over the last second
 
     # ------------------------------------------------------------------ feedback from the server
     def observe(self, t: float, joints: np.ndarray) -> None:
@@ -155,6 +165,7 @@ class Labeller:
         self._skel = []
         self._facing = None
         self._t_lost = self._t_ambiguous = None
+        self._free_hist = []
 
     # ------------------------------------------------------------------ per frame
     def label(self, packets: list, t: float) -> tuple[np.ndarray, LabelQuality]:
@@ -175,6 +186,11 @@ class Labeller:
             if explained:
                 self._t_good = t
             if t - self._t_good <= self.config.lost_after:
+                audited = self._audit(pts, q, t)
+                if audited is not None:
+                    out, q = audited
+                    self._update(out, t, reset=True)
+                    return out, q
                 self._update(out, t, shared=self._shared)
                 return out, q
             log.debug("t=%.3f: tracking explains %d of %d points: identifying again", t, q.n_labelled, len(pts))
@@ -269,6 +285,7 @@ class Labeller:
                     assign[[lm, rm]], arow[[lm, rm]], out[[lm, rm]] = assign[[rm, lm]], arow[[rm, lm]], out[[rm, lm]]
         _split_shared(out, assign, pred, cfg.merged_half_m, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
+        self._assign = assign
         # rigid distances and facing: drop the worse-predicted marker of a violating group
         for group in self._body.violations(out):
             worst = max(group, key=lambda m: d[arow[m], m])
@@ -277,7 +294,7 @@ class Labeller:
         if assign[LS] >= 0 and assign[RS] >= 0 and self._facing is not None:
             # the body turns at most ~2 turns/s: a facing far from the last one is a mislabel
             f = _facing(out[LS], out[RS])
-            limit = math.cos(min(math.pi, math.radians(45.0) + cfg.max_turn_rate * (t - self._t_facing)))
+            limit = math.cos(min(math.pi, math.radians(cfg.turn_slack_deg) + cfg.max_turn_rate * (t - self._t_facing)))
             if f is not None and float(f @ self._facing) < limit:
                 out[[LS, RS]] = np.nan
                 assign[[LS, RS]] = arow[[LS, RS]] = -1
@@ -379,11 +396,10 @@ class Labeller:
             assign[m] = p
             arow[m] = int(np.flatnonzero(row_pt == p)[0])
 
-    def _identify(self, pts: Points3D, t: float) -> tuple[np.ndarray, LabelQuality] | None:
+    def _hint(self, t: float) -> Hint:
+        """What identification may assume at time t: the last facing (trusted less the longer
+        ago; the standard pose's +Y before any labelling) and the body's travel."""
         cfg = self.config
-        if len(pts) < cfg.min_points:
-            return None
-        trust = np.where(pts.n_views >= 3, 0.0, np.minimum(0.9 * pts.unexplained, 2.0))
         hint = Hint()
         if self._facing is not None:
             hint.facing = self._facing
@@ -393,7 +409,89 @@ class Labeller:
         if len(self._centres) >= 2 and self._centres[-1][0] - self._centres[0][0] >= 0.2:
             (t0, c0), (t1, c1) = self._centres[0], self._centres[-1]
             hint.velocity = (c1 - c0) / (t1 - t0)
+        return hint
+
+    @staticmethod
+    def _trust(pts: Points3D) -> np.ndarray:
+        """(M,) identification penalty per point: 0 from >= 3 views, else for the views that missed it."""
+        return np.where(pts.n_views >= 3, 0.0, np.minimum(0.9 * pts.unexplained, 2.0))
+
+    def _audit(self, pts: Points3D, q: LabelQuality, t: float) -> tuple[np.ndarray, LabelQuality] | None:
+        """Check the tracked names of this frame against a fresh identification, every
+        ``audit_interval`` s while a point that is surely a marker (>= 3 views, or no view
+        missing it) and not a static reflection stays unnamed: tracking that went wrong (a wrist that took its shoulder's
+        point, a leg named for the other) keeps itself wrong, a fresh look does not. The
+        identification, which counts each name it shares with tracking as evidence
+        (``audit_agree``), replaces the tracked names when it is clear (``min_margin`` over
+        every rival) and scores ``audit_margin`` more than they do, or names >= 2 more markers
+        where the tracked names lack a shoulder. Returns (8, 3) markers and quality, or None."""
+        cfg = self.config
+        assign = self._assign
+        free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
+        free = free[(pts.n_views[free] >= 3) | (pts.unexplained[free] == 0)]
+        self._free_hist = [h for h in self._free_hist if t - h[0] <= 1.0] + [(t, pts.X[free])]
+        if not math.isfinite(cfg.audit_interval) or t - self._t_audit < cfg.audit_interval or \
+                len(pts) < cfg.min_points or not self._moving(pts.X[free], t).any():
+            return None
+        self._t_audit = t
+        self.stats.audits += 1
+        trust = self._trust(pts)
+        hint = self._hint(t)
+        hint.labels, hint.labels_weight = assign, cfg.audit_agree
         hyps = identify(pts.X, trust, self._body, hint, shared=pts.merged_all)
+        if not hyps:
+            return None
+        best = hyps[0]
+        if not (_disputed(assign, [best]) & (assign >= 0)).any() and \
+                np.count_nonzero(best.labels >= 0) <= np.count_nonzero(assign >= 0):
+            return None
+        rivals = [h.score for h in hyps[1:] if (_disputed(best.labels, [h]) & (best.labels >= 0)).any()]
+        margin = best.score - max(rivals) if rivals else best.score
+        if margin < cfg.min_margin:
+            return None
+        tracked = score_labels(pts.X, trust, self._body, hint, assign, pts.merged_all)
+        if tracked is None:
+            if np.count_nonzero(best.labels >= 0) < q.n_labelled + 2:
+                return None
+        elif best.score - tracked < cfg.audit_margin:
+            return None
+        self.stats.audit_switches += 1
+        log.debug("t=%.3f s: tracked names replaced by an identification (score %.2f over %s)", t, best.score,
+                  "no shoulders" if tracked is None else f"{tracked:.2f}")
+        out = self._named(pts, best.labels, best.facing)
+        return out, LabelQuality(int(np.count_nonzero(best.labels >= 0)), len(pts), 0.1 * margin, 0.0,
+                                 "identified", 0)
+
+    def _moving(self, X: np.ndarray, t: float) -> np.ndarray:
+        """(F,) bool per free sure point X (F, 3): not a static reflection, i.e. not within 2 cm
+        of a free point 0.5 to 1 s ago, every 0.1 s (a marker is named or moves)."""
+        old: list[tuple[float, np.ndarray]] = []
+        for ht, Y in self._free_hist:
+            if t - ht >= 0.5 and (not old or ht - old[-1][0] >= 0.1 - 1e-6):
+                old.append((ht, Y))
+        if len(old) < 3:
+            return np.ones(len(X), bool)
+        static = np.ones(len(X), bool)
+        for _ht, Y in old:
+            if not len(Y):
+                return np.ones(len(X), bool)
+            static &= np.min(np.linalg.norm(X[:, None] - Y[None], axis=2), axis=1) <= 0.02
+        return ~static
+
+    def _named(self, pts: Points3D, labels: np.ndarray, facing: np.ndarray) -> np.ndarray:
+        """(8, 3) markers at the points labels (8,) name (-1 = unnamed), a shared point split
+        along the right of facing (2,)."""
+        out = np.full((N_MARKERS, 3), np.nan)
+        named = labels >= 0
+        out[named] = pts.X[labels[named]]
+        _split_shared(out, labels, np.zeros((N_MARKERS, 3)), self.config.merged_half_m, _right(facing))
+        return out
+
+    def _identify(self, pts: Points3D, t: float) -> tuple[np.ndarray, LabelQuality] | None:
+        cfg = self.config
+        if len(pts) < cfg.min_points:
+            return None
+        hyps = identify(pts.X, self._trust(pts), self._body, self._hint(t), shared=pts.merged_all)
         if not hyps:
             self._t_ambiguous = None
             return None
@@ -414,11 +512,8 @@ class Labeller:
         self._t_ambiguous = None
         rivals = [h.score for h in hyps[1:] if (_disputed(labels, [h]) & (labels >= 0)).any()]
         margin = best.score - max(rivals) if rivals else best.score
-        out = np.full((N_MARKERS, 3), np.nan)
+        out = self._named(pts, labels, best.facing)
         named = labels >= 0
-        out[named] = pts.X[labels[named]]
-        right = _right(best.facing)
-        _split_shared(out, labels, np.zeros((N_MARKERS, 3)), cfg.merged_half_m, right)
         self.stats.identifications += 1
         if self.stats.first_identified_t is None:
             self.stats.first_identified_t = t

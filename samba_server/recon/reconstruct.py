@@ -29,13 +29,16 @@ import numpy as np
 
 from samba_common.align import batch_frames
 from samba_common.body import fk, standard_pose
-from samba_common.markerset import body_markers, markers_from_joints
+from samba_common.markerset import OFFSET_SIGMA, TYPICAL_OFFSETS, body_markers, markers_from_joints
 from samba_common.skeleton import BONE_TYPES, N_JOINTS, N_MARKERS
+from samba_common.subject import Subject
 
 from .db import MotionDB, load_default_db
 from .proportions import ProportionError, estimate_lengths
 from . import kernels
 from .kdtree import KDTree
+from .live_subject import LiveSubjectCalibration, describe
+from .subject_model import placement_from_standard_pose
 
 log = logging.getLogger(__name__)
 
@@ -53,6 +56,12 @@ class ReconstructConfig:
     fewer observed markers make a frame "bridged" by the temporal model; max_gap: longest bridge
     (s), beyond it frames are NaN; max_iter: LM iteration cap; body_frames: frames used to
     estimate the body live (see :meth:`Reconstructor._estimate_body`); seed: pseudo-pose noise bank seed.
+    Live subject (a Reconstructor built without lengths and offsets, :mod:`.live_subject`):
+    placement: "auto" (decided from the standard pose), "skin" or "joint_centres";
+    subject_seconds: seconds of solved frames after the standard pose that calibrate the skin
+    offsets and lengths; subject_refine_seconds: a second calibration from that many further
+    seconds (0 = none); subject_swap_frames: frames between a calibration and its use (it is
+    computed in a background thread; a replay swaps at the same frame).
     """
 
     k: int = 10
@@ -71,6 +80,14 @@ class ReconstructConfig:
     body_frames: int = 30
     seed: int = 7
     parts: bool = True
+    placement: str = "auto"
+    subject_seconds: float = 1.0
+    subject_refine_seconds: float = 4.0
+    subject_swap_frames: int = 10
+
+    def __post_init__(self) -> None:
+        if self.placement not in ("auto", "skin", "joint_centres"):
+            raise ValueError(f"placement must be auto, skin or joint_centres, got {self.placement!r}")
 
 
 @dataclass
@@ -155,8 +172,11 @@ class Reconstructor:
     BONE_TYPES order, or None to estimate them from the first ``config.body_frames`` frames.
     offsets: (8, 3) marker offsets in their segment frames (samba_common.markerset), metres;
     None = markers on the joint centres. With ``lengths`` None and offsets given, the live body
-    estimate removes the offsets first (the subject's offsets, or the typical ones).
-    The joints solved are always joint centres; :meth:`markers_of` gives the model markers.
+    estimate removes the offsets first (the subject's offsets, or the typical ones). With both
+    None the subject is measured live (``config.placement``; :mod:`.live_subject`): ``subject``
+    holds the current one (None until the standard pose was seen) and ``subject_version``
+    counts its changes. The joints solved are always joint centres; :meth:`markers_of` gives
+    the model markers.
     """
 
     def __init__(self, db: MotionDB | None = None, config: ReconstructConfig | None = None,
@@ -173,6 +193,12 @@ class Reconstructor:
         self._dims = {flag: _padded(PART_DIMS if flag else (WHOLE[1],)) for flag in (False, True)}
         self._cols = {flag: _padded(PART_FEATURES if flag else WHOLE[:1]) for flag in (False, True)}
         self._estimating = lengths is None
+        #: live subject: placement still to decide ("auto"), or fixed; None = the caller gave it
+        self._live_placement = self.config.placement if lengths is None and offsets is None else None
+        self._next_offsets: np.ndarray | None = None
+        self._calibration: LiveSubjectCalibration | None = None
+        self.subject: Subject | None = None
+        self.subject_version = 0
         self._body_buffer: list[np.ndarray] = []
         self._pending_body: tuple | None = None
         self.lengths: np.ndarray | None = None
@@ -183,6 +209,7 @@ class Reconstructor:
         self._hist = _History()
         if lengths is not None:
             self.set_lengths(lengths)
+            self.subject = Subject(self.lengths, self.offsets, None, "skin" if np.any(self.offsets) else "joint_centres")
 
     # --- subject -------------------------------------------------------------------------
     def set_lengths(self, lengths: np.ndarray) -> None:
@@ -192,11 +219,20 @@ class Reconstructor:
             raise ValueError(f"bone lengths must be 8 positive numbers, got {lengths}")
         self.lengths, self.index, self._trees = self._build_index(lengths)
 
-    def _build_index(self, lengths: np.ndarray) -> tuple[np.ndarray, PoseIndex, tuple]:
-        """The database re-posed with ``lengths`` and its KD-trees (lengths, index, tree arrays)."""
-        index = PoseIndex(self.db, lengths, self.offsets)
+    def _build_index(self, lengths: np.ndarray, offsets: np.ndarray | None = None) -> tuple[np.ndarray, PoseIndex, tuple]:
+        """The database re-posed with ``lengths`` and ``offsets`` (default: the current ones) and
+        its KD-trees (lengths, index, tree arrays)."""
+        index = PoseIndex(self.db, lengths, self.offsets if offsets is None else offsets)
         trees = tuple(index.tree(c).arrays() for c in (PART_FEATURES if self.config.parts else WHOLE[:1]))
         return lengths, index, trees
+
+    def _set_subject(self, subject: Subject, built: tuple | None = None) -> None:
+        """Install a live subject (and its re-posed index, else built now); logs it."""
+        self.offsets = np.array(subject.offsets, float)
+        self.lengths, self.index, self._trees = built if built is not None else self._build_index(subject.lengths)
+        self.subject = subject
+        self.subject_version += 1
+        log.info("live subject #%d %s", self.subject_version, describe(subject))
 
     def warm_up(self) -> None:
         """Compile the solver now rather than on the first live frame (the very first run on a
@@ -227,7 +263,26 @@ class Reconstructor:
             self._estimate_body(markers)
             if self.lengths is None:
                 return self._unsolved(int(np.all(np.isfinite(markers), axis=1).sum()))
-        return self._solve(markers, float(t))
+        result = self._solve(markers, float(t))
+        if self._calibration is not None:
+            self._calibration.step(markers, float(t), result.status, result.residual, result.state)
+            if self._calibration.done:
+                self._calibration = None
+        return result
+
+    def _decide_placement(self, buffer: np.ndarray) -> None:
+        """Live, no subject given: skin landmarks or joint centres from the standard-pose frames
+        (``config.placement`` "auto"), so that the body estimate removes the right offsets."""
+        placement, why = self._live_placement, "set in [reconstruct] placement"
+        if placement == "auto":
+            found = placement_from_standard_pose(buffer, self.db.mean_lengths)
+            if found is None:
+                placement, why = "joint_centres", "no standard pose in the first frames: joint centres assumed"
+            else:
+                placement, why, _n = found
+        log.info("live marker placement: %s (%s)", placement.replace("_", " "), why)
+        self._live_placement = placement
+        self._next_offsets = TYPICAL_OFFSETS.copy() if placement == "skin" else np.zeros((N_MARKERS, 3))
 
     def _estimate_body(self, markers: np.ndarray) -> None:
         """Live body estimate: from the first frame that shows enough of the body (built at once),
@@ -244,20 +299,34 @@ class Reconstructor:
                 return
             self._body_buffer = [markers]  # count the standard pose from the first usable frame
         elif n == n_cfg and self._pending_body is None:
+            if self._live_placement is not None and self._next_offsets is None:
+                self._decide_placement(np.array(self._body_buffer))
+            offsets = self.offsets if self._next_offsets is None else self._next_offsets
             try:
-                lengths = estimate_lengths(np.array(self._body_buffer), self.db.mean_lengths, self.offsets)
+                lengths = estimate_lengths(np.array(self._body_buffer), self.db.mean_lengths, offsets)
             except ProportionError:
                 return
             box: dict = {}
-            worker = threading.Thread(target=lambda: box.update(built=self._build_index(lengths)), daemon=True,
-                                      name="samba-body")
+            worker = threading.Thread(target=lambda: box.update(built=self._build_index(lengths, offsets)),
+                                      daemon=True, name="samba-body")
             worker.start()
             self._pending_body = (worker, box)
         elif n >= 2 * n_cfg and self._pending_body is not None:
             worker, box = self._pending_body
             worker.join()
-            self.lengths, self.index, self._trees = box["built"]
             self._estimating, self._body_buffer, self._pending_body = False, [], None
+            if self._next_offsets is None:
+                self.lengths, self.index, self._trees = box["built"]
+                return
+            skin = bool(np.any(self._next_offsets))
+            lengths0 = box["built"][0]
+            self._set_subject(Subject(lengths0, self._next_offsets, OFFSET_SIGMA.copy() if skin else None,
+                                      "skin" if skin else "joint_centres"), box["built"])
+            if skin:
+                cfg = self.config
+                self._calibration = LiveSubjectCalibration(
+                    lengths0, (cfg.subject_seconds, cfg.subject_refine_seconds), cfg.subject_swap_frames,
+                    self._build_index, self._set_subject)
 
     def _unsolved(self, n: int) -> PoseResult:
         return PoseResult(np.full((N_JOINTS, 3), np.nan), float("nan"), n, 0, "unsolved")

@@ -26,22 +26,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from samba_common.body import fk_body
-from samba_common.markerset import OFFSET_SIGMA, TYPICAL_OFFSETS, segment_frames_body
-from samba_common.skeleton import BONE_TYPES, MARKER_JOINT, MARKER_NAMES, N_MARKERS
+from samba_common.markerset import OFFSET_SIGMA, TYPICAL_OFFSETS
+from samba_common.skeleton import BONE_TYPES, MARKER_NAMES, N_MARKERS
 from samba_common.subject import Subject
 
 from .db import MotionDB, load_default_db
-from .proportions import (ProportionError, _dist, _robust, approximate_centres, estimate_lengths,
-                          standard_pose_frames)
+from .proportions import ProportionError, estimate_lengths, standard_pose_frames  # noqa: F401 (tests patch it)
 from .reconstruct import Reconstructor, ReconstructConfig
+from .subject_model import LENGTH_SIGMA, decorrelation, linear_update, placement_from_standard_pose
 
 log = logging.getLogger(__name__)
-
-#: prior standard deviation (m) of each bone length about its start value (BONE_TYPES order);
-#: the neck has no marker and keeps its start value
-LENGTH_SIGMA = np.array([0.03, 0.015, 0.015, 0.003, 0.01, 0.01, 0.015, 0.03])
-
 
 @dataclass
 class CalibrationReport:
@@ -87,38 +81,6 @@ def _states(markers: np.ndarray, t: np.ndarray, db: MotionDB, cfg: ReconstructCo
     return idx, np.array(Rs), np.array(os_), np.array(ds), float(np.sqrt(np.nanmean(np.square(res))))
 
 
-def _linear_update(markers: np.ndarray, R: np.ndarray, o: np.ndarray, dirs: np.ndarray, lengths0: np.ndarray,
-                   sigma_data: float, decorrelate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """One least-squares step (module docstring, step 3). markers: (n, 8, 3) of the solved frames.
-    Returns lengths (8,), offsets (8, 3), their posterior sigmas (8,), (8, 3)."""
-    n = len(R)
-    nl = len(BONE_TYPES)
-    A = np.stack([fk_body(dirs, np.eye(nl)[k])[:, list(MARKER_JOINT)] for k in range(nl)], axis=-1)  # (n, 8, 3, 8)
-    S = segment_frames_body(dirs)  # (n, 8, 3, 3)
-    B = np.zeros((n, N_MARKERS, 3, nl + 3 * N_MARKERS))
-    B[..., :nl] = A
-    for i in range(N_MARKERS):
-        B[:, i, :, nl + 3 * i: nl + 3 * i + 3] = S[:, i]
-    y = np.einsum("fji,fmj->fmi", R, markers - o[:, None, :])  # observations in torso coordinates
-    seen = np.all(np.isfinite(y), axis=2)
-    y = np.where(seen[..., None], y, 0.0)
-    cnt = np.maximum(seen.sum(axis=1), 1)[:, None]
-    y_mean = y.sum(axis=1) / cnt
-    B_mean = np.einsum("fm,fmck->fck", seen.astype(float), B) / cnt[:, :, None]
-    yc = (y - y_mean[:, None]) * seen[..., None]
-    Bc = (B - B_mean[:, None]) * seen[..., None, None]
-    Bc = Bc.reshape(-1, B.shape[-1])
-    yc = yc.reshape(-1)
-    w = 1.0 / (sigma_data ** 2 * decorrelate)
-    prior_mu = np.concatenate([lengths0, TYPICAL_OFFSETS.reshape(-1)])
-    prior_sig = np.concatenate([LENGTH_SIGMA, OFFSET_SIGMA.reshape(-1)])
-    H = w * Bc.T @ Bc + np.diag(1.0 / prior_sig ** 2)
-    g = w * Bc.T @ yc + prior_mu / prior_sig ** 2
-    theta = np.linalg.solve(H, g)
-    sig = np.sqrt(np.diag(np.linalg.inv(H)))
-    return theta[:nl], theta[nl:].reshape(N_MARKERS, 3), sig[:nl], sig[nl:].reshape(N_MARKERS, 3)
-
-
 def calibrate_subject(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = None,
                       config: ReconstructConfig | None = None, iterations: int = 2,
                       max_frames: int = 900) -> CalibrationReport:
@@ -137,15 +99,11 @@ def calibrate_subject(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = 
     lengths = lengths0.copy()
     sig_l, sig_o = LENGTH_SIGMA.copy(), OFFSET_SIGMA.copy()
     resid, used = float("nan"), 0
-    dt = float(np.median(np.diff(t))) if len(t) > 1 else 1 / 30
     for _ in range(iterations):
         idx, R, o, dirs, resid = _states(markers, t, db, cfg, lengths, offsets, max_frames)
         used = len(idx)
-        step = (idx[1] - idx[0]) if len(idx) > 1 else 1
-        decorrelate = max(1.0, 0.2 / max(dt * step, 1e-3))  # frames closer than 0.2 s are not independent
-        lengths, offsets, sig_l, sig_o = _linear_update(markers[idx], R, o, dirs, lengths0, max(resid, 0.003),
-                                                        decorrelate)
-        lengths = np.maximum(lengths, 0.2 * lengths0)
+        lengths, offsets, sig_l, sig_o = linear_update(markers[idx], R, o, dirs, lengths0, max(resid, 0.003),
+                                                       decorrelation(t[idx]))
         log.debug("subject update: lengths %s offsets %s", np.round(lengths, 4), np.round(offsets, 4))
     subject = Subject(lengths, offsets, sig_o, "skin")
     return CalibrationReport(subject, used, resid, OFFSET_SIGMA.copy())
@@ -183,38 +141,10 @@ def guess_placement(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = No
     cfg = config or ReconstructConfig()
     markers = np.asarray(markers, dtype=float)
     dbl = db.mean_lengths
-    sw = _robust(_dist(markers, "left_shoulder", "right_shoulder"))
-    shin = _robust(np.concatenate([_dist(markers, "left_knee", "left_ankle"), _dist(markers, "right_knee", "right_ankle")]))
-    arm = _robust(np.concatenate([_dist(markers, "left_shoulder", "left_wrist"),
-                                  _dist(markers, "right_shoulder", "right_wrist")]), 97.0)
-    if not np.all(np.isfinite([sw, shin, arm])) or min(sw, shin, arm) <= 0:
-        raise ProportionError("cannot tell the marker placement: shoulders, shins or arms never seen")
-    scale = np.exp(np.mean(np.log([sw / dbl[0], shin / dbl[7], arm / (dbl[4] + dbl[5])])))
-    expected = float(dbl[1] * scale)
-    # standard-pose frames as either placement sees them (a hanging skin arm looks ~5 % longer)
-    as_skin = approximate_centres(markers, TYPICAL_OFFSETS)
-    arm_skin = _robust(np.concatenate([_dist(as_skin, "left_shoulder", "left_wrist"),
-                                       _dist(as_skin, "right_shoulder", "right_wrist")]), 97.0)
-    stand = standard_pose_frames(markers, arm) | standard_pose_frames(as_skin, arm_skin)
-    if stand.sum() >= 5:
-        ratio = dbl[6] / dbl[7]
-
-        def hip(m: np.ndarray) -> float:
-            knee, ankle = _dist(m, "left_knee", "right_knee"), _dist(m, "left_ankle", "right_ankle")
-            return _robust(knee - (ankle - knee) * ratio)
-
-        h_jc = hip(markers[stand])
-        h_skin = hip(as_skin[stand])
-
-        def miss(h: float) -> float:  # the offsets add to the hip width: compare differences, not ratios
-            return abs(h - expected) if np.isfinite(h) else np.inf
-
-        if np.isfinite(miss(h_jc)) or np.isfinite(miss(h_skin)):
-            placement = "joint_centres" if miss(h_jc) < miss(h_skin) else "skin"
-            reason = (f"standard pose ({int(stand.sum())} frames): hip width {100 * h_jc:.1f} cm if the markers were "
-                      f"joint centres, {100 * h_skin:.1f} cm if skin landmarks; the proportions predict "
-                      f"{100 * expected:.1f} cm")
-            return PlacementGuess(placement, "standard pose", reason)
+    found = placement_from_standard_pose(markers, dbl)
+    if found is not None:
+        placement, reason, _n = found
+        return PlacementGuess(placement, "standard pose", reason)
     report = calibrate_subject(markers, t, db, cfg)
     *_s, res_jc = _states(markers, t, db, cfg, estimate_lengths(markers, dbl), np.zeros((N_MARKERS, 3)), 900)
     res_skin = report.residual

@@ -112,9 +112,9 @@ def test_auto_placement_tells_skin_from_joint_centres_without_the_files_key(tmp_
 def test_guess_placement_from_motion_alone(monkeypatch):
     """Without a standard pose the motion decides: skin markers stay skin (with the calibration
     reused), and the reason names the residuals of both models."""
-    from samba_server.recon import subject_fit
+    from samba_server.recon import subject_fit, subject_model
 
-    monkeypatch.setattr(subject_fit, "standard_pose_frames", lambda m, arm: np.zeros(len(m), bool))
+    monkeypatch.setattr(subject_model, "standard_pose_frames", lambda m, arm: np.zeros(len(m), bool))
     _joints, t, _off, skin, centres = _take(standard=False, seed=12)
     db = load_default_db()
     g = subject_fit.guess_placement(skin, t, db)

@@ -143,3 +143,54 @@ def test_points_merged_blob_stands_for_two_markers_and_clutter_is_bounded():
         d = np.linalg.norm(got.X - p, axis=1)
         assert d.min() < 0.01 and got.n_views[np.argmin(d)] == 4
     assert got.merged_all[np.argmin(np.linalg.norm(got.X - pts[-1], axis=1))]
+
+
+@pytest.mark.parametrize("audit", [True, False])
+def test_tracking_gone_wrong_is_corrected_by_a_fresh_identification(audit):
+    """Tracking that named a leg's markers on the other leg (as after a wrong guess from the
+    skeleton) keeps itself wrong: mid-take the left knee and ankle tracks are moved onto the
+    right leg and the right leg's tracks are lost (no skeleton to predict them). The audit by a fresh identification names every marker right again within 0.2 s;
+    without it the left leg stays wrong or unnamed."""
+    from dataclasses import replace
+
+    from samba_server.labelling.labeller import LabelConfig
+    from samba_server.labelling.rigid import LA, LK, RA, RK
+
+    rig = default_rig(4)
+    truth = _motion(3.0)
+    cfg = LabelConfig() if audit else replace(LabelConfig(), audit_interval=float("inf"))
+    lab = Labeller(rig, config=cfg)
+    rng = np.random.default_rng(6)
+    named = []
+    for i, m in enumerate(truth):
+        if i == 60:
+            lab._pos[[LK, LA]] = lab._pos[[RK, RA]] + 0.01
+            lab._pos[[RK, RA]] = np.nan
+            lab._seen[[RK, RA]] = -np.inf
+        got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
+        named.append(got)
+    right = _right(np.array(named), truth).all(axis=1)
+    assert right[:60].all()
+    if audit:
+        assert right[60 + int(0.2 * FPS):].all() and lab.stats.audit_switches >= 1
+    else:
+        assert not right[60 + int(0.2 * FPS):].any()
+
+
+def test_static_reflections_in_3d_are_not_markers_and_do_not_keep_auditing():
+    """Three shiny objects seen by every camera (3D-consistent points that never move): never
+    named, and once known as static they do not set off identification audits."""
+    rig = default_rig(4)
+    truth = _motion(3.0)
+    shiny = np.array([[1.5, 1.5, 0.8], [-1.5, 1.0, 1.6], [1.0, -1.5, 0.05]])
+    shown = np.concatenate([truth, np.repeat(shiny[None], len(truth), axis=0)], axis=1)
+    lab = Labeller(rig)
+    rng = np.random.default_rng(7)
+    named = []
+    for i, m in enumerate(shown):
+        got, _q = lab.label(_packets(rig, m, i / FPS, rng, labels=None), i / FPS)
+        named.append(got)
+    named = np.array(named)
+    assert _right(named, truth).all(axis=1)[20:].mean() >= 0.98
+    assert not (np.isfinite(named).all(axis=2) & ~_right(named, truth, 0.05)).any()
+    assert lab.stats.audits <= 8  # at most the first second's, every 0.1 s

@@ -90,7 +90,9 @@ def test_closed_take_is_indexed_with_schemas(tmp_path):
         assert ev.encoding == "jsonschema" and topics[EVENTS_TOPIC].message_encoding == "json"
         js = json.loads(ev.data)
         event = json.loads(next(d for t, _, d in sent if t == EVENTS_TOPIC))
-        assert set(js["required"]) == set(event) and event["event"] in js["properties"]["event"]["enum"]
+        join_required = set(js["required"]) | set(js["allOf"][0]["then"]["required"])
+        assert join_required == set(event) and event["event"] in js["properties"]["event"]["enum"]
+        assert "subject" in js["properties"]["event"]["enum"]  # the live subject events
         # the index answers a topic query; everything comes back in log_time order
         assert sum(1 for _ in r.iter_messages(topics=[markers_topic("cam1")])) == 20
         times = [msg.log_time for _, _, msg in r.iter_messages()]

@@ -111,7 +111,8 @@ def test_file_motes_live_replay_and_max_speed(tmp_path, file_take) -> None:
             import json
 
             ev = json.loads(m.data)
-            ref.mote_event(ev["mote_id"], ev["event"] == "join", ev["t_ns"])
+            if ev["event"] in ("join", "leave"):
+                ref.mote_event(ev["mote_id"], ev["event"] == "join", ev["t_ns"])
         ref.process_pending()
     ref.finish()
     _same(ref.poses, server2.poses)
