@@ -628,3 +628,22 @@ def recorded_subjects(path: str | Path) -> list[tuple[int, str]]:
         if isinstance(ev, dict) and ev.get("event") == "subject" and isinstance(ev.get("subject_toml"), str):
             out.append((int(ev.get("seq", 0)), ev["subject_toml"]))
     return out
+
+
+def take_subject(path: str | Path):
+    """The subject a take was recorded with when the server was given one (``--subject``:
+    ``subject_toml`` in the ``samba`` metadata record), as a samba_common.subject.Subject, or
+    None (then a replayed solver measures it live again, as the server did)."""
+    from samba_common.subject import SubjectError, load_subject_text
+
+    reader = TakeReader(path, topics=[CALIBRATION_TOPIC])
+    for _m in reader:
+        break  # the metadata record is written before the first message
+    toml = reader.metadata.get("samba", {}).get("subject_toml")
+    if not toml:
+        return None
+    try:
+        return load_subject_text(toml, f"{path} (its recorded subject)")
+    except SubjectError as exc:
+        log.warning("%s", exc)
+        return None

@@ -27,7 +27,7 @@ from samba_common import zenoh_util as zk
 
 from samba_common.pose_wire import FLAG_SOLVE_SKIPPED, PoseError, decode_pose
 
-from .record import CALIBRATION_TOPIC, EVENTS_TOPIC, POSE_TOPIC, TakeReader, recorded_subjects  # noqa: F401
+from .record import CALIBRATION_TOPIC, EVENTS_TOPIC, POSE_TOPIC, TakeReader, recorded_subjects, take_subject  # noqa: F401
 from .server import Server
 
 log = logging.getLogger(__name__)
@@ -38,25 +38,6 @@ def take_calibration(path: str | Path) -> bytes | None:
     for m in TakeReader(path, topics=[CALIBRATION_TOPIC]):
         return m.data
     return None
-
-
-def take_subject(path: str | Path):
-    """The subject a take was recorded with when the server was given one (``--subject``:
-    ``subject_toml`` in the ``samba`` metadata record), as a samba_common.subject.Subject, or
-    None (then the replayed solver measures it live again, as the server did)."""
-    from samba_common.subject import SubjectError, load_subject_text
-
-    reader = TakeReader(path, topics=[CALIBRATION_TOPIC])
-    for _m in reader:
-        break  # the metadata record is written before the first message
-    toml = reader.metadata.get("samba", {}).get("subject_toml")
-    if not toml:
-        return None
-    try:
-        return load_subject_text(toml, f"{path} (its recorded subject)")
-    except SubjectError as exc:
-        log.warning("%s", exc)
-        return None
 
 
 def skipped_solves(path: str | Path) -> set[int] | None:

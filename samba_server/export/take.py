@@ -132,16 +132,10 @@ def _mcap_subject(p: Path) -> Subject | None:
     from samba_server import record
 
     events = record.recorded_subjects(p)
-    text = events[-1][1] if events else None
-    if text is None:
-        reader = record.TakeReader(p, topics=[record.CALIBRATION_TOPIC])
-        for _m in reader:
-            break
-        text = reader.metadata.get("samba", {}).get("subject_toml")
-    if not text:
-        return None
+    if not events:
+        return record.take_subject(p)
     try:
-        return load_subject_text(text, f"{p} (recorded subject)")
+        return load_subject_text(events[-1][1], f"{p} (recorded subject)")
     except SubjectError as exc:
         log.warning("%s", exc)
         return None
