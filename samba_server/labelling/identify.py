@@ -158,7 +158,7 @@ def _legs_score(X: np.ndarray, trust: np.ndarray, L: int, R: int, left: tuple[in
             sc -= _LATERAL_W * max(0.0, _LATERAL_M - float((X[b] - X[a])[:2] @ r))
     kl, kr = _share(kl, kr, shared)
     al, ar = _share(al, ar, shared)
-    sc += (kl == kr >= 0) + (al == ar >= 0)  # a shared point names two markers
+    sc += int(kl == kr >= 0) + int(al == ar >= 0)  # a shared point names two markers (int: numpy bools add as "or")
     sc += hint.agree(LK, kl) + hint.agree(LA, al) + hint.agree(RK, kr) + hint.agree(RA, ar)
     return sc, kl, al, kr, ar
 

@@ -73,6 +73,7 @@ class LabelConfig:
     audit_interval: float = 0.1  #: s: while tracking leaves a sure point unnamed, identify afresh this often (inf: never) ...
     audit_margin: float = 1.0  #: ... and take the identification when it scores this much more than the tracked names
     audit_agree: float = 0.3  #: score, per marker, of agreeing with a tracked name in that identification
+    audit_extend_margin: float = 0.5  #: an identification that only adds names to the tracked ones needs this much more
     facing_weight: float = 3.0  #: weight of the known facing when identifying ...
     facing_decay: float = 1.0  #: ... decaying with this time constant since it was known
     first_facing_weight: float = 1.0  #: before any labelling: the standard pose faces +Y
@@ -186,10 +187,11 @@ class Labeller:
             if explained:
                 self._t_good = t
             if t - self._t_good <= self.config.lost_after:
-                audited = self._audit(pts, q, t)
+                audited = self._audit(pts, out, q, t)
                 if audited is not None:
                     out, q = audited
-                    self._update(out, t, reset=True)
+                    # an audit that only adds names keeps the tracks; one that renames restarts them
+                    self._update(out, t, reset=q.mode == "identified", shared=self._shared)
                     return out, q
                 self._update(out, t, shared=self._shared)
                 return out, q
@@ -416,15 +418,17 @@ class Labeller:
         """(M,) identification penalty per point: 0 from >= 3 views, else for the views that missed it."""
         return np.where(pts.n_views >= 3, 0.0, np.minimum(0.9 * pts.unexplained, 2.0))
 
-    def _audit(self, pts: Points3D, q: LabelQuality, t: float) -> tuple[np.ndarray, LabelQuality] | None:
+    def _audit(self, pts: Points3D, tracked_out: np.ndarray, q: LabelQuality,
+               t: float) -> tuple[np.ndarray, LabelQuality] | None:
         """Check the tracked names of this frame against a fresh identification, every
         ``audit_interval`` s while a point that is surely a marker (>= 3 views, or no view
         missing it) and not a static reflection stays unnamed: tracking that went wrong (a wrist that took its shoulder's
         point, a leg named for the other) keeps itself wrong, a fresh look does not. The
         identification, which counts each name it shares with tracking as evidence
         (``audit_agree``), replaces the tracked names when it is clear (``min_margin`` over
-        every rival) and scores ``audit_margin`` more than they do, or names >= 2 more markers
-        where the tracked names lack a shoulder. Returns (8, 3) markers and quality, or None."""
+        every rival) and scores ``audit_margin`` more than they do (``audit_extend_margin``
+        when it only adds names: a wrist whose track and skeleton lost it), or names >= 2 more
+        markers where the tracked names lack a shoulder. tracked_out: (8, 3) the tracked names. Returns (8, 3) markers and quality, or None."""
         cfg = self.config
         assign = self._assign
         free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
@@ -442,8 +446,8 @@ class Labeller:
         if not hyps:
             return None
         best = hyps[0]
-        if not (_disputed(assign, [best]) & (assign >= 0)).any() and \
-                np.count_nonzero(best.labels >= 0) <= np.count_nonzero(assign >= 0):
+        extends = not (_disputed(assign, [best]) & (assign >= 0)).any()
+        if extends and np.count_nonzero(best.labels >= 0) <= np.count_nonzero(assign >= 0):
             return None
         rivals = [h.score for h in hyps[1:] if (_disputed(best.labels, [h]) & (best.labels >= 0)).any()]
         margin = best.score - max(rivals) if rivals else best.score
@@ -453,12 +457,17 @@ class Labeller:
         if tracked is None:
             if np.count_nonzero(best.labels >= 0) < q.n_labelled + 2:
                 return None
-        elif best.score - tracked < cfg.audit_margin:
+        elif best.score - tracked < (cfg.audit_extend_margin if extends else cfg.audit_margin):
             return None
         self.stats.audit_switches += 1
         log.debug("t=%.3f s: tracked names replaced by an identification (score %.2f over %s)", t, best.score,
                   "no shoulders" if tracked is None else f"{tracked:.2f}")
         out = self._named(pts, best.labels, best.facing)
+        if extends:  # the tracked names stay as tracked (a shared point's split included)
+            keep = np.isfinite(tracked_out).all(axis=1)
+            out[keep] = tracked_out[keep]
+            q.n_labelled = int(np.isfinite(out).all(axis=1).sum())
+            return out, q
         return out, LabelQuality(int(np.count_nonzero(best.labels >= 0)), len(pts), 0.1 * margin, 0.0,
                                  "identified", 0)
 

@@ -194,3 +194,22 @@ def test_static_reflections_in_3d_are_not_markers_and_do_not_keep_auditing():
     assert _right(named, truth).all(axis=1)[20:].mean() >= 0.98
     assert not (np.isfinite(named).all(axis=2) & ~_right(named, truth, 0.05)).any()
     assert lab.stats.audits <= 8  # at most the first second's, every 0.1 s
+
+
+def test_merged_knees_and_merged_ankles_each_name_two_markers():
+    """Feet together seen from far away: one point for both knees and one for both ankles.
+    Each names two markers (the labelling scores as 8 named, like four separate points would),
+    and the audit's scorer gives identify's labelling identify's score."""
+    from samba_server.labelling.identify import Hint, identify, score_labels
+    from samba_server.labelling.rigid import LA, LK, RA, RK, Body
+
+    body = Body.from_lengths(None)
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("together", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    X = np.vstack([pose[:4], pose[[LK, RK]].mean(axis=0), pose[[LA, RA]].mean(axis=0)])
+    shared = np.array([False] * 4 + [True, True])
+    trust = np.zeros(len(X))
+    hint = Hint(facing=np.array([0.0, 1.0]), facing_weight=1.0)
+    best = identify(X, trust, body, hint, shared=shared)[0]
+    assert list(best.labels[[LK, RK, LA, RA]]) == [4, 4, 5, 5]
+    assert best.score > 7.0  # 8 markers named, small penalties
+    assert score_labels(X, trust, body, hint, best.labels, shared) == pytest.approx(best.score)
