@@ -32,7 +32,7 @@ from samba_server.calibrate.floor import apply_transform, lframe_transform, tria
 from samba_server.calibrate.selfcal import self_calibrate  # noqa: E402
 from samba_server.calibrate.simwand import (pose_errors, simulate_lframe, simulate_subject,  # noqa: E402
                                             simulate_wand)
-from samba_server.calibrate.wand import _resolve, calibrate_wand  # noqa: E402
+from samba_server.calibrate.wand import _resolve, calibrate_wand, wand_length_stats  # noqa: E402
 from samba_server.triangulate import TriangulateConfig, Triangulator  # noqa: E402
 
 
@@ -72,17 +72,18 @@ def board_step(rig: CameraRig, views: int, seed: int) -> CameraRig:
     camera (``samba-calibrate intrinsics``), with their uncertainties as the wand's priors."""
     import cv2
 
-    from samba_server.calibrate.intrinsics import Board, detect, render_board_views
-    from samba_server.calibrate.wand import STD_KEY
+    from samba_server.calibrate.intrinsics import Board, detect, intrinsics_covariance, render_board_views
+    from samba_server.calibrate.wand import COV_KEY, STD_KEY
 
     board = Board.parse("checkerboard:7x5:0.03")
     cams, meta = [], {}
     for i, c in enumerate(rig.cameras):
         found = [f for f in (detect(board, im) for im in render_board_views(c, board, views, seed=seed + i)) if f]
-        _, K, d, _, _, std, _, _ = cv2.calibrateCameraExtended([f[0] for f in found], [f[1].astype(np.float32) for f in found],
-                                                              c.size, None, None, flags=cv2.CALIB_FIX_K3)
+        objs, imgs = [f[0] for f in found], [f[1].astype(np.float32) for f in found]
+        _, K, d, rv, tv, std, _, _ = cv2.calibrateCameraExtended(objs, imgs, c.size, None, None, flags=cv2.CALIB_FIX_K3)
         cams.append(Camera(c.name, c.size, K, d.ravel()[:5]))
         meta[STD_KEY + c.name] = [float(v) for v in std.ravel()[:9]]
+        meta[COV_KEY + c.name] = intrinsics_covariance(objs, imgs, K, d, rv, tv).tolist()
     return CameraRig(cams, meta)
 
 
@@ -94,9 +95,9 @@ def bench_wand(frames: int, seeds: int, views: int) -> tuple[list[str], CameraRi
            "principal point, k1, k2). Centre errors after the best rigid alignment; reported = the 95 % "
            "radius from the adjustment's covariance.", "",
            "| seed | board fx error (px, max) | max centre error (mm) | reported 95 % radius (mm, min-max) | "
-           "max rotation error (deg) | scale error (%) | reported scale sigma (%) | reprojection rms (px) | "
+           "max rotation error (deg) | reported 95 % rotation (deg, min-max) | scale error (%) | reported scale sigma (%) | reprojection rms (px) | "
            "wand mean (mm) | wand sigma (mm) | sigma, true calibration (mm) | time (s) |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     rig = default_rig(4)
     first = None
     agg = []
@@ -111,18 +112,19 @@ def bench_wand(frames: int, seeds: int, views: int) -> tuple[list[str], CameraRi
         serr = rig_scale(np.stack([c.center for c in est.cameras])) / rig_scale(np.stack([c.center for c in rig.cameras])) - 1
         fxe = max(abs(c.matrix[0, 0] - t.matrix[0, 0]) for c, t in zip(start.cameras, rig.cameras))
         _, pts, _ = _resolve(list(rig.cameras), obs.uv)
-        floor_sigma = float(np.nanstd(np.linalg.norm(pts[:, 1] - pts[:, 0], axis=1)))
+        floor_sigma = wand_length_stats(np.linalg.norm(pts[:, 1] - pts[:, 0], axis=1))[1]
         out.append(f"| {seed} | {fxe:.2f} | {1000 * ce.max():.2f} | {1000 * u.centre_95_m.min():.1f}-{1000 * u.centre_95_m.max():.1f} | "
-                   f"{re.max():.3f} | {100 * serr:+.3f} | {100 * u.scale_sigma:.3f} | {rep.rms_total:.3f} | "
+                   f"{re.max():.3f} | {u.rotation_95_deg.min():.3f}-{u.rotation_95_deg.max():.3f} | {100 * serr:+.3f} | {100 * u.scale_sigma:.3f} | {rep.rms_total:.3f} | "
                    f"{1000 * rep.wand_mean_m:.2f} | {1000 * rep.wand_sigma_m:.2f} | {1000 * floor_sigma:.2f} | {dt:.1f} |")
         print(out[-1], flush=True)
         agg.append((ce.max(), re.max(), rep.rms_total, rep.wand_sigma_m, floor_sigma, abs(rep.wand_mean_m - 0.5),
-                    float(np.max(ce / u.centre_95_m)), abs(serr) / u.scale_sigma, abs(serr)))
+                    float(np.max(ce / u.centre_95_m)), abs(serr) / u.scale_sigma, abs(serr), float(np.max(re / u.rotation_95_deg))))
         if first is None:
             first = (est, rep)
     a = np.array(agg)
     out += ["", f"Reported uncertainty: every centre error within its 95 % radius: **{'yes' if a[:, 6].max() <= 1 else 'no'}** "
-            f"(largest error / radius {a[:, 6].max():.2f}); scale error at most {a[:, 7].max():.1f} reported sigma; "
+            f"(largest error / radius {a[:, 6].max():.2f}); every rotation error within its 95 % angle: "
+            f"**{'yes' if a[:, 9].max() <= 1 else 'no'}** (largest error / angle {a[:, 9].max():.2f}); scale error at most {a[:, 7].max():.1f} reported sigma; "
             f"scale within **{100 * a[:, 8].max():.3f} %** (target 0.2 %).",
             "", f"Over {seeds} seeds ({frames} wand positions each): centres within **{1000 * a[:, 0].max():.1f} mm** "
             f"(target 5), rotations within **{a[:, 1].max():.3f} deg** (target 0.1), reprojection rms "

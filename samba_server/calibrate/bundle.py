@@ -115,6 +115,7 @@ def bundle_adjust(
     intrinsics: tuple[str, ...] = (),
     prior_sigma: np.ndarray | None = None,
     sigma_px: float = 0.3,
+    prior_cov: np.ndarray | None = None,
 ) -> BundleResult:
     """Refine camera poses (except ``fixed``) and structure to minimise reprojection error.
 
@@ -123,9 +124,10 @@ def bundle_adjust(
     otherwise every point is a free 3D point. ``intrinsics``: names from
     :data:`INTRINSIC_PARAMS` refined for every camera (``f`` in px moves fx and fy together),
     each with a Gaussian prior: ``prior_sigma`` (C, len(intrinsics)) standard deviations (px
-    for f, cx, cy; unitless for k1, k2) around the cameras' current values; ``sigma_px`` is
-    the expected per-axis pixel noise that weighs the priors against the reprojection
-    residuals. Returns refined cameras (copies) and points.
+    for f, cx, cy; unitless for k1, k2) around the cameras' current values, or ``prior_cov``
+    (C, ni, ni) full covariances (same units; the board step's k1 and k2 are strongly
+    correlated); ``sigma_px`` is the expected per-axis pixel noise that weighs the priors
+    against the reprojection residuals. Returns refined cameras (copies) and points.
     """
     C = len(cameras)
     free = [c for c in range(C) if c not in set(fixed)]
@@ -141,13 +143,21 @@ def bundle_adjust(
     intr = [INTRINSIC_PARAMS.index(n) for n in intrinsics]  # prior_sigma columns follow this order
     ni = len(intr)
     if ni:
-        ps = np.asarray(prior_sigma, dtype=float) if prior_sigma is not None else None
-        if ps is None or ps.shape != (C, ni) or not np.all(ps > 0):
-            raise ValueError(f"prior_sigma must be ({C}, {ni}) positive standard deviations")
+        if prior_cov is None:
+            ps = np.asarray(prior_sigma, dtype=float) if prior_sigma is not None else None
+            if ps is None or ps.shape != (C, ni) or not np.all(ps > 0):
+                raise ValueError(f"prior_sigma must be ({C}, {ni}) positive standard deviations")
+            prior_cov = np.einsum("ci,ij->cij", ps ** 2, np.eye(ni))
+        pc = np.asarray(prior_cov, dtype=float)
+        if pc.shape != (C, ni, ni):
+            raise ValueError(f"prior_cov must be ({C}, {ni}, {ni})")
+        try:  # whitening: prior residual = sigma_px * Wc (p - p0), Wc^T Wc = cov_c^-1
+            prior_W = sigma_px * np.linalg.cholesky(np.linalg.inv(0.5 * (pc + pc.transpose(0, 2, 1)))).transpose(0, 2, 1)
+        except np.linalg.LinAlgError:
+            raise ValueError("prior_cov must be positive definite") from None
         # current values per camera, (C, 5) in INTRINSIC_PARAMS order
         i0 = np.stack([K_all[:, 0, 0], K_all[:, 0, 2], K_all[:, 1, 2], D_all[:, 0], D_all[:, 1]], axis=1)[:, intr]
         aspect = K_all[:, 1, 1] / K_all[:, 0, 0]
-        prior_w = sigma_px / ps  # prior residual = sigma_px * (p - p0) / sigma_p
 
     def intrinsics_of(ip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(C, ni) intrinsic parameters -> K (C, 3, 3), dist (C, 5)."""
@@ -213,7 +223,7 @@ def bundle_adjust(
         Kc, Dc = intrinsics_of(ip) if ni else (K_all, D_all)
         r = (project_obs(rv[obs.cam], tv[obs.cam], Kc[obs.cam], Dc[obs.cam], X[obs.point]) - obs.uv).ravel()
         if ni:
-            r = np.concatenate([r, ((ip - i0) * prior_w).ravel()])
+            r = np.concatenate([r, np.einsum("cij,cj->ci", prior_W, ip - i0).ravel()])
         return r
 
     M = len(obs)
@@ -234,9 +244,10 @@ def bundle_adjust(
         for j in (0, 1):
             rr.append(2 * rows + j)
             cc.append(nci + bs * blk + k)
-    if ni:  # prior rows: one per intrinsic parameter
-        rr.append(2 * M + np.arange(C * ni))
-        cc.append(nc + np.arange(C * ni))
+    if ni:  # prior rows: ni per camera, each on all of that camera's intrinsics
+        ci_, ji_, ki_ = np.meshgrid(np.arange(C), np.arange(ni), np.arange(ni), indexing="ij")
+        rr.append((2 * M + ci_ * ni + ji_).ravel())
+        cc.append((nc + ci_ * ni + ki_).ravel())
     rr_a, cc_a = np.concatenate(rr), np.concatenate(cc)
     S = coo_matrix((np.ones(len(rr_a), dtype=np.int8), (rr_a, cc_a)),
                    shape=(2 * M + C * ni, len(x0))).tocsr()

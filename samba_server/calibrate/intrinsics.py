@@ -134,12 +134,49 @@ class IntrinsicsResult:
     n_frames: int  #: frames read
     coverage: float  #: fraction of 8x6 image cells holding a detected corner
     #: standard deviations (9,) of fx, fy, cx, cy (px), k1, k2, p1, p2, k3 (OpenCV's estimate
-    #: from the corner residuals); the wand step uses them as priors
+    #: from the corner residuals)
     std: np.ndarray = field(default_factory=lambda: np.full(9, np.nan))
+    #: covariance (9, 9) of the same parameters (:func:`intrinsics_covariance`; rows and
+    #: columns of fixed coefficients are 0); the wand step uses it as its prior
+    cov: np.ndarray = field(default_factory=lambda: np.full((9, 9), np.nan))
+
+
+def intrinsics_covariance(objs: list[np.ndarray], imgs: list[np.ndarray], K: np.ndarray, dist: np.ndarray,
+                          rvecs, tvecs, fix_k3: bool = True) -> np.ndarray:
+    """Covariance (9, 9) of [fx, fy, cx, cy, k1, k2, p1, p2, k3] (px, px, px, px, 1...) of a
+    board calibration, the views' poses marginalised (Schur complement): ``s^2 (J^T J)^-1``
+    with s^2 the corner residuals' sum of squares over the degrees of freedom, as OpenCV's
+    standard deviations (whose squares are its diagonal). The off-diagonal terms matter:
+    k1 and k2 are strongly anticorrelated (the board fixes the radial profile far better than
+    either), and a prior built from the standard deviations alone lets the wand step trade
+    the profile against the principal point (0.1-0.2 deg of camera rotation).
+
+    objs: per view (N, 3) board points m; imgs: per view (N, 2) corners px; K (3, 3), dist
+    (>= 5,), rvecs/tvecs per view, from ``cv2.calibrateCamera*``."""
+    d = np.zeros(5)
+    dd = np.asarray(dist, float).ravel()[:5]
+    d[:len(dd)] = dd
+    free = np.array([True] * 8 + [not fix_k3])
+    info = np.zeros((9, 9))
+    ss, n_res, n_par = 0.0, 0, int(free.sum())
+    for o, im, rv, tv in zip(objs, imgs, rvecs, tvecs):
+        proj, jac = cv2.projectPoints(np.asarray(o, np.float64), rv, tv, K, d)
+        r = proj.reshape(-1, 2) - np.asarray(im, np.float64).reshape(-1, 2)
+        ss += float(np.sum(r * r))
+        n_res += r.size
+        n_par += 6
+        Jp, Ji = jac[:, :6], jac[:, 6:15]  # pose; fx, fy, cx, cy, k1, k2, p1, p2, k3
+        A = Jp.T @ Jp
+        B = Jp.T @ Ji
+        info += Ji.T @ Ji - B.T @ np.linalg.solve(A, B)
+    cov = np.zeros((9, 9))
+    sigma2 = ss / max(n_res - n_par, 1)
+    cov[np.ix_(free, free)] = sigma2 * np.linalg.inv(info[np.ix_(free, free)])
+    return cov
 
 
 def calibrate_intrinsics(name: str, source: str | os.PathLike, board: Board, step: int = 1,
-                         max_views: int = 60, fix_k3: bool = True, progress=None) -> IntrinsicsResult:
+                         max_views: int = 200, fix_k3: bool = True, progress=None) -> IntrinsicsResult:
     """Calibrate one camera's K and distortion from board views; raises ValueError when the
     board was found in fewer than 4 views."""
     objs, imgs, size, n = [], [], None, 0
@@ -160,7 +197,7 @@ def calibrate_intrinsics(name: str, source: str | os.PathLike, board: Board, ste
         keep = np.linspace(0, len(objs) - 1, max_views).round().astype(int)
         objs, imgs = [objs[k] for k in keep], [imgs[k] for k in keep]
     flags = cv2.CALIB_FIX_K3 if fix_k3 else 0
-    rms, K, dist, _, _, std, _, _ = cv2.calibrateCameraExtended(objs, imgs, size, None, None, flags=flags)
+    rms, K, dist, rvecs, tvecs, std, _, _ = cv2.calibrateCameraExtended(objs, imgs, size, None, None, flags=flags)
     w, h = size
     allp = np.concatenate(imgs)
     cells = {(int(u * 8 // w), int(v * 6 // h)) for u, v in allp if 0 <= u < w and 0 <= v < h}
@@ -169,7 +206,8 @@ def calibrate_intrinsics(name: str, source: str | os.PathLike, board: Board, ste
     sd = np.full(9, np.nan)
     got = np.asarray(std, float).ravel()[:9]
     sd[:len(got)] = got
-    return IntrinsicsResult(cam, float(rms), len(objs), n, len(cells) / 48.0, sd)
+    cov = intrinsics_covariance(objs, imgs, K, dist, rvecs, tvecs, fix_k3)
+    return IntrinsicsResult(cam, float(rms), len(objs), n, len(cells) / 48.0, sd, cov)
 
 
 def render_board_views(camera: Camera, board: Board, n_views: int = 12, seed: int = 0,

@@ -37,13 +37,16 @@ class RigUncertainty:
     3D centre error expected (m); scale_sigma: relative standard deviation of the rig's scale
     (0.001 = 0.1 %), not counting the error of the wand length itself; focal_sigma_px: (C,)
     standard deviation of fx after the adjustment (NaN when f was not refined); sigma_px:
-    per-axis pixel noise estimated from the residuals."""
+    per-axis pixel noise estimated from the residuals; rotation_95_deg: (C,) angle (deg) that
+    holds each camera's rotation error after the same alignment with 95 % probability (the
+    principal point trades against it: 0.25 px at f = 140 px is 0.1 deg)."""
 
     centre_95_m: np.ndarray
     centre_sigma_m: np.ndarray
     scale_sigma: float
     focal_sigma_px: np.ndarray
     sigma_px: float
+    rotation_95_deg: np.ndarray | None = None
 
 
 def camera_covariance(res: BundleResult) -> tuple[np.ndarray, float]:
@@ -79,6 +82,16 @@ def camera_covariance(res: BundleResult) -> tuple[np.ndarray, float]:
 def _centre(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
     """Camera centre (3,) = -R^T t for a Rodrigues vector rvec (3,) and translation tvec (3,)."""
     return -rotate(-rvec[None], tvec[None])[0]
+
+
+def _rotmat(rvec: np.ndarray) -> np.ndarray:
+    """Rotation matrix (3, 3) of a Rodrigues vector rvec (3,)."""
+    return rotate(np.repeat(rvec[None], 3, axis=0), np.eye(3)).T
+
+
+def _so3_log(R: np.ndarray) -> np.ndarray:
+    """Rotation vector (3,) of a rotation matrix R (3, 3) near the identity."""
+    return 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
 
 
 def _rigid_basis(centres: np.ndarray) -> np.ndarray:
@@ -123,6 +136,7 @@ def rig_uncertainty(res: BundleResult, seed: int = 0) -> RigUncertainty:
         e = (z * np.sqrt(np.clip(w, 0, None))) @ v.T
         r95[c] = float(np.quantile(np.linalg.norm(e, axis=1), 0.95))
         rms[c] = float(np.sqrt(max(np.trace(S3), 0.0)))
+    rot95 = _rotation_95(res, cov, G, centres, z)
     d = centres - centres.mean(axis=0)
     s = float(np.sqrt(np.mean(np.sum(d * d, axis=1))))
     g = (d / (C * s)).ravel()  # ds / dc
@@ -131,7 +145,47 @@ def rig_uncertainty(res: BundleResult, seed: int = 0) -> RigUncertainty:
     if "f" in res.intrinsics:
         base = 6 * len(res.free) + res.intrinsics.index("f")
         focal = np.sqrt(np.clip(np.diag(cov)[base::res.n_intr][:C], 0, None))
-    return RigUncertainty(r95, rms, scale_sigma, focal, sigma)
+    return RigUncertainty(r95, rms, scale_sigma, focal, sigma, rot95)
+
+
+def _rotation_95(res: BundleResult, cov: np.ndarray, G: np.ndarray, centres: np.ndarray,
+                 z: np.ndarray) -> np.ndarray:
+    """(C,) 95 % radius (deg) of each camera's rotation error after the best rigid alignment
+    of the centres (how ``simwand.pose_errors`` measures it). Linearised: the error rotation
+    (camera frame, rad) is the camera's own rotation change minus the alignment's rotation
+    (the rotational part of the least-squares rigid fit of the centre changes ``G dp``).
+    cov: (n, n) camera covariance; G: (3 C, n) centre Jacobian; z: (S, 3) standard normals."""
+    cams: list[Camera] = res.cameras
+    C, n = len(cams), cov.shape[0]
+    d = centres - centres.mean(axis=0)
+    B = np.zeros((3 * C, 6))  # rigid motion: translation (3), rotation (3) of the centres
+    for k in range(3):
+        e = np.zeros(3)
+        e[k] = 1.0
+        B[:, k] = np.tile(e, C)
+        B[:, 3 + k] = np.cross(e, d).ravel()
+    Lrot = np.linalg.pinv(B)[3:]  # (3, 3 C): alignment rotation from centre changes
+    Omega = Lrot @ G  # (3, n) world-frame rotation of the alignment per parameter
+    out = np.zeros(C)
+    eps = 1e-7
+    for c in range(C):
+        # R_est = exp([a]) R; a rigid motion exp([w]) of the whole rig gives a = -R w and
+        # centre changes w x d, so the aligned error is a + R Omega (camera frame, rad)
+        H = cams[c].R @ Omega
+        if c in res.free:
+            slot = res.free.index(c)
+            R0 = _rotmat(cams[c].rvec)
+            for k in range(3):
+                rp, rm = cams[c].rvec.copy(), cams[c].rvec.copy()
+                rp[k] += eps
+                rm[k] -= eps
+                dR = (_so3_log(_rotmat(rp) @ R0.T) - _so3_log(_rotmat(rm) @ R0.T)) / (2 * eps)
+                H[:, 6 * slot + k] += dR
+        S3 = H @ cov @ H.T
+        w, v = np.linalg.eigh(0.5 * (S3 + S3.T))
+        e = (z * np.sqrt(np.clip(w, 0, None))) @ v.T
+        out[c] = float(np.degrees(np.quantile(np.linalg.norm(e, axis=1), 0.95)))
+    return out
 
 
 def rig_scale(centres: np.ndarray) -> float:

@@ -49,6 +49,25 @@ REFINE_INTRINSICS = ("f", "cx", "cy", "k1", "k2")
 #: ``intrinsics_std_<camera> = [fx, fy, cx, cy, k1, k2, p1, p2, k3]`` (px, px, px, px, 1...)
 STD_KEY = "intrinsics_std_"
 
+#: metadata key prefix of the board step's covariance (9 x 9, same parameters and order as
+#: ``STD_KEY``; written by ``samba-calibrate intrinsics``); preferred to ``STD_KEY`` as prior
+COV_KEY = "intrinsics_cov_"
+
+#: positions of f (fx), cx, cy, k1, k2 in the board step's 9 parameters
+_BOARD_INDEX = (0, 2, 3, 4, 5)
+
+
+#: lower bound of a board-step prior, as a fraction of :func:`default_prior_sigma`. It was 0.1,
+#: which replaced the board's principal-point sigma (about 0.2 px) by 0.48 px and its focal
+#: length sigma by 0.28 px: the wand then pulled the principal point 0.3-0.5 px off (0.1-0.2
+#: deg of camera rotation). 0.01 (0.05 px for cx, cy) only guards against a zero.
+PRIOR_FLOOR = 0.01
+#: the board step's covariance (OpenCV's, from the corner residuals) is scaled by this squared:
+#: measured on rendered boards, its k1/k2 errors are 1.5-3x the sigma it reports, and a prior
+#: tighter than the truth pins the wand to biased intrinsics (rotations 1.6x their reported
+#: 95 % angle, centres outside their radius).
+BOARD_SIGMA_SCALE = 2.0
+
 
 def default_prior_sigma(cam: Camera) -> np.ndarray:
     """Prior standard deviations (5,) for f, cx, cy, k1, k2 when the board step gave none:
@@ -59,8 +78,10 @@ def default_prior_sigma(cam: Camera) -> np.ndarray:
 
 def prior_sigma(rig: CameraRig, names: tuple[str, ...]) -> np.ndarray:
     """(C, len(names)) prior standard deviations of the intrinsics ``names`` for every camera:
-    the board step's (``metadata[intrinsics_std_<camera>]``, floored at 1/10 of
-    :func:`default_prior_sigma` so a prior never freezes a parameter). A camera without them
+    the board step's (``metadata[intrinsics_std_<camera>]``, as measured: OpenCV's estimate
+    is honest on rendered boards, see docs/calibration.md; floored only at
+    :data:`PRIOR_FLOOR` of :func:`default_prior_sigma` so a degenerate zero never freezes a
+    parameter). Units: px for f, cx, cy; unitless for k1, k2. A camera without them
     (intrinsics from elsewhere, whose accuracy is unknown) keeps its intrinsics: its priors
     are 1e-6 of the defaults."""
     from samba_server.calibrate.bundle import INTRINSIC_PARAMS
@@ -79,9 +100,39 @@ def prior_sigma(rig: CameraRig, names: tuple[str, ...]) -> np.ndarray:
             log.info("%s: no board-step uncertainties in the calibration file: intrinsics kept as given", cam.name)
             d = 1e-6 * d
         else:
-            d = np.maximum(board, 0.1 * d)
+            d = np.maximum(BOARD_SIGMA_SCALE * board, PRIOR_FLOOR * d)
         out.append([d[INTRINSIC_PARAMS.index(n)] for n in names])
     return np.array(out, dtype=float).reshape(len(rig), len(names))
+
+
+def prior_covariance(rig: CameraRig, names: tuple[str, ...]) -> np.ndarray:
+    """(C, n, n) prior covariances of the intrinsics ``names`` (n = len(names)) for every
+    camera: the board step's full covariance (``metadata[intrinsics_cov_<camera>]``, its f
+    is fx's) when present, else the diagonal of :func:`prior_sigma`. Each diagonal gets
+    (:data:`PRIOR_FLOOR` x :func:`default_prior_sigma`)^2 added, so a degenerate zero never
+    freezes a parameter. Units: px^2 for f, cx, cy; 1 for k1, k2."""
+    from samba_server.calibrate.bundle import INTRINSIC_PARAMS
+
+    diag = prior_sigma(rig, names)
+    out = np.einsum("ci,ij->cij", diag ** 2, np.eye(len(names)))
+    for c, cam in enumerate(rig.cameras):
+        cov = rig.metadata.get(COV_KEY + cam.name)
+        if cov is None or (STD_KEY + cam.name) not in rig.metadata:
+            continue
+        try:
+            full = np.asarray(cov, dtype=float).reshape(9, 9)
+        except ValueError:
+            log.warning("%s: %s%s is not 9 x 9: using the standard deviations", cam.name, COV_KEY, cam.name)
+            continue
+        idx = [_BOARD_INDEX[INTRINSIC_PARAMS.index(n)] for n in names]
+        sub = BOARD_SIGMA_SCALE ** 2 * full[np.ix_(idx, idx)]
+        floor = PRIOR_FLOOR * default_prior_sigma(cam)[[INTRINSIC_PARAMS.index(n) for n in names]]
+        sub = 0.5 * (sub + sub.T) + np.diag(floor ** 2)
+        if np.all(np.isfinite(sub)) and np.all(np.linalg.eigvalsh(sub) > 0):
+            out[c] = sub
+        else:
+            log.warning("%s: the board covariance is not positive definite: using the standard deviations", cam.name)
+    return out
 
 
 @dataclass
@@ -114,7 +165,8 @@ class WandReport:
             out.append(f"  scale: +-{196 * u.scale_sigma:.3f} % (plus the error of the wand length itself)")
             for k, name in enumerate(self.rms_px):
                 f = "" if not np.isfinite(u.focal_sigma_px[k]) else f", focal length +-{1.96 * u.focal_sigma_px[k]:.2f} px"
-                out.append(f"  {name}: centre within {1000 * u.centre_95_m[k]:.1f} mm{f}")
+                r = "" if u.rotation_95_deg is None else f", rotation within {u.rotation_95_deg[k]:.2f} deg"
+                out.append(f"  {name}: centre within {1000 * u.centre_95_m[k]:.1f} mm{r}{f}")
         if self.intrinsics_change:
             out.append("intrinsics refined by the wand (change from the input):")
             out += [f"  {k}: {v}" for k, v in self.intrinsics_change.items()]
@@ -304,7 +356,7 @@ def calibrate_wand(
         try:
             cams, uv_i, pts, rms = _initialise(cams0, uv, xy, seen, i, j, L, min_frames, max_error_px)
             cams, pts, rep = _adjust(cams, uv_i, pts, rms, offsets, i, max_error_px, refine,
-                                     prior_sigma(rig, refine) if refine else None)
+                                     prior_covariance(rig, refine) if refine else None)
         except CalibrateError as exc:
             errors.append(str(exc))
             log.info("initialisation from %s-%s failed: %s", cams0[i].name, cams0[j].name, exc)
@@ -380,7 +432,7 @@ def _initialise(cams0, uv, xy, seen, i, j, L, min_frames, max_error_px):
     return cams, uv, pts, rms
 
 
-def _adjust(cams, uv, pts, rms, offsets, ref, max_error_px, refine=(), sigma_prior=None):
+def _adjust(cams, uv, pts, rms, offsets, ref, max_error_px, refine=(), prior_cov=None):
     """Bundle adjustment with the rigid wand; a second pass without outlier observations
     (always made when intrinsics are refined: the priors are then weighed with the pixel
     noise measured in the first pass). The intrinsics' priors stay centred on the input."""
@@ -398,7 +450,7 @@ def _adjust(cams, uv, pts, rms, offsets, ref, max_error_px, refine=(), sigma_pri
                     for c, c0 in zip(cams, cams_in)]
         res = bundle_adjust(cams, obs, pts[fr].reshape(-1, 3), wand_offsets=offsets, fixed=(ref,),
                             f_scale=1.0 if it == 0 else max_error_px, intrinsics=tuple(refine),
-                            prior_sigma=sigma_prior, sigma_px=sigma_px)
+                            prior_cov=prior_cov, sigma_px=sigma_px)
         cams = res.cameras
         pts = np.full((F, Kw, 3), np.nan)
         pts[fr] = res.points.reshape(-1, Kw, 3)
@@ -442,8 +494,7 @@ def _report(rig: CameraRig, uv: np.ndarray, offsets: np.ndarray, rep: dict) -> W
     res = Triangulator(rig, TriangulateConfig(max_error_px=1e9, iterations=3)).triangulate(
         uv[fr].transpose(1, 0, 2, 3).reshape(C, -1, 2))
     P = res.points.reshape(len(fr), Kw, 3)
-    lengths = np.linalg.norm(P[:, -1] - P[:, 0], axis=1)
-    lengths = lengths[np.isfinite(lengths)]
+    mean_l, sigma_l, _ = wand_length_stats(np.linalg.norm(P[:, -1] - P[:, 0], axis=1))
     seen = np.all(np.isfinite(uv[fr]), axis=(2, 3))
     cov, pairs = {}, {}
     for a, b in itertools.combinations(range(C), 2):
@@ -452,8 +503,24 @@ def _report(rig: CameraRig, uv: np.ndarray, offsets: np.ndarray, rep: dict) -> W
         pairs[key] = int(both.sum())
         pts = P[both].reshape(-1, 3)
         cov[key] = _coverage(pts[np.all(np.isfinite(pts), axis=1)])
-    return WandReport(rms, nobs, float(np.mean(lengths)), float(np.std(lengths)), len(fr), cov, pairs)
+    return WandReport(rms, nobs, mean_l, sigma_l, len(fr), cov, pairs)
 
 
-__all__ = ["CalibrateError", "REFINE_INTRINSICS", "STD_KEY", "WandReport", "calibrate_wand", "default_prior_sigma",
-           "normalized", "prior_sigma"]
+def wand_length_stats(lengths: np.ndarray, k: float = 5.0) -> tuple[float, float, int]:
+    """Mean and standard deviation (m) of free-triangulated wand lengths (N,) m (NaN ignored)
+    over the positions within ``k`` robust sigmas (1.4826 x median absolute deviation) of the
+    median, and the number left out. A wand seen by only two cameras facing each other is
+    triangulated from nearly parallel rays (lengths off by decimetres) though the adjustment,
+    which knows the wand is rigid, uses it well; such positions must not swamp the spread."""
+    x = np.asarray(lengths, dtype=float)
+    x = x[np.isfinite(x)]
+    if not len(x):
+        return float("nan"), float("nan"), 0
+    med = float(np.median(x))
+    mad = 1.4826 * float(np.median(np.abs(x - med)))
+    keep = np.abs(x - med) <= k * mad if mad > 0 else np.ones(len(x), bool)
+    return float(np.mean(x[keep])), float(np.std(x[keep])), int(len(x) - keep.sum())
+
+
+__all__ = ["COV_KEY", "CalibrateError", "REFINE_INTRINSICS", "STD_KEY", "WandReport", "calibrate_wand", "default_prior_sigma",
+           "normalized", "prior_covariance", "prior_sigma", "wand_length_stats"]

@@ -93,9 +93,10 @@ def cmd_intrinsics(a: argparse.Namespace) -> int:
         rig = rig.replace(cam)
     else:
         rig = CameraRig([cam])
-    from samba_server.calibrate.wand import STD_KEY
+    from samba_server.calibrate.wand import COV_KEY, STD_KEY
 
     rig.metadata[STD_KEY + a.camera] = [float(v) for v in res.std]  # priors of the wand step
+    rig.metadata[COV_KEY + a.camera] = [[float(v) for v in row] for row in res.cov]
     rig.metadata["source"] = "samba-calibrate intrinsics"
     rig.save(out)
     print(f"{a.camera}: rms {res.rms_px:.3f} px from {res.n_views} of {res.n_frames} frames; "

@@ -25,8 +25,9 @@ def _free_wand_sigma(rig: CameraRig, uv: np.ndarray) -> float:
     from samba_server.calibrate.wand import _resolve
 
     _, pts, _ = _resolve(list(rig.cameras), uv)
-    d = np.linalg.norm(pts[:, 1] - pts[:, 0], axis=1)
-    return float(np.nanstd(d))
+    from samba_server.calibrate.wand import wand_length_stats
+
+    return wand_length_stats(np.linalg.norm(pts[:, 1] - pts[:, 0], axis=1))[1]
 
 
 def test_wand_calibration_meets_targets_4_cameras() -> None:
@@ -43,7 +44,9 @@ def test_wand_calibration_meets_targets_4_cameras() -> None:
     # the wand length spread is the triangulation noise floor of 160x120 at 5 m: the
     # recovered calibration adds (almost) nothing to what the true calibration gives
     assert rep.wand_sigma_m <= 1.1 * _free_wand_sigma(rig, obs.uv)
-    assert rep.n_frames == 600 and sum(rep.n_obs.values()) == 600 * 4 * 2
+    seen = np.all(np.isfinite(obs.uv), axis=(2, 3))  # (F, C): the wand leaves some views
+    multi = seen.sum(axis=1) >= 2
+    assert rep.n_frames == int(multi.sum()) and sum(rep.n_obs.values()) == 2 * int(seen[multi].sum())
     assert set(rep.coverage) == {"cam0-cam1", "cam0-cam2", "cam0-cam3", "cam1-cam2", "cam1-cam3", "cam2-cam3"}
     assert all(0 < v <= 1 for v in rep.coverage.values())
     # the rig is usable: triangulating the true wand with it is accurate once aligned
@@ -229,18 +232,19 @@ def _board_rig(rig: CameraRig, views: int = 30, seed: int = 0) -> CameraRig:
     the board step's uncertainties in the metadata (the wand step's priors)."""
     import cv2
 
-    from samba_server.calibrate.intrinsics import Board, detect, render_board_views
-    from samba_server.calibrate.wand import STD_KEY
+    from samba_server.calibrate.intrinsics import Board, detect, intrinsics_covariance, render_board_views
+    from samba_server.calibrate.wand import COV_KEY, STD_KEY
 
     board = Board.parse("checkerboard:7x5:0.03")
     cams, meta = [], {}
     for i, c in enumerate(rig.cameras):
         found = [detect(board, im) for im in render_board_views(c, board, views, seed=seed + i)]
         found = [f for f in found if f is not None]
-        _, K, d, _, _, std, _, _ = cv2.calibrateCameraExtended([f[0] for f in found], [f[1].astype(np.float32) for f in found],
-                                                              c.size, None, None, flags=cv2.CALIB_FIX_K3)
+        objs, imgs = [f[0] for f in found], [f[1].astype(np.float32) for f in found]
+        _, K, d, rv, tv, std, _, _ = cv2.calibrateCameraExtended(objs, imgs, c.size, None, None, flags=cv2.CALIB_FIX_K3)
         cams.append(Camera(c.name, c.size, K, d.ravel()[:5]))
         meta[STD_KEY + c.name] = [float(v) for v in std.ravel()[:9]]
+        meta[COV_KEY + c.name] = intrinsics_covariance(objs, imgs, K, d, rv, tv).tolist()
     return CameraRig(cams, meta)
 
 
@@ -280,8 +284,10 @@ def test_intrinsics_without_board_uncertainties_are_kept() -> None:
 
 def test_reported_uncertainty_covers_the_true_error() -> None:
     """Board step first (rendered checkerboards), then the wand: over 3 takes x 4 cameras the
-    true centre errors lie within the reported 95 % radii (at most one miss), the radii are
-    not absurdly loose (median error / radius > 0.1), and the scale error is within 3 sigma."""
+    true centre errors lie within the reported 95 % radii (at most two misses, none beyond 1.5
+    radii: an honest 95 % radius misses 2 of 12 with probability 0.10, 3 of 12 with 0.02), the
+    radii are not absurdly loose (median error / radius > 0.1), and the scale error is within
+    3 sigma."""
     from samba_server.calibrate.uncertainty import rig_scale
 
     rig = default_rig(4)
@@ -296,6 +302,6 @@ def test_reported_uncertainty_covers_the_true_error() -> None:
         s_err = rig_scale(np.stack([c.center for c in out.cameras])) / rig_scale(np.stack([c.center for c in rig.cameras])) - 1
         scale_z.append(abs(s_err) / u.scale_sigma)
     ratios = np.array(ratios)
-    assert np.sum(ratios > 1.0) <= 1, ratios
+    assert np.sum(ratios > 1.0) <= 2 and ratios.max() < 1.5, ratios
     assert np.median(ratios) > 0.1, ratios
     assert max(scale_z) < 3.0, scale_z
