@@ -31,7 +31,7 @@ from samba_common.skeleton import BONE_TYPES, MARKER_NAMES, N_MARKERS
 from samba_common.subject import Subject
 
 from .db import MotionDB, load_default_db
-from .proportions import ProportionError, estimate_lengths, standard_pose_frames  # noqa: F401 (tests patch it)
+from .proportions import ProportionError, estimate_lengths, estimate_start, standard_pose_frames  # noqa: F401 (tests patch it)
 from .reconstruct import Reconstructor, ReconstructConfig
 from .subject_model import LENGTH_SIGMA, decorrelation, linear_update, placement_from_standard_pose
 
@@ -94,8 +94,8 @@ def calibrate_subject(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = 
     cfg = config or ReconstructConfig()
     markers = np.asarray(markers, dtype=float)
     t = np.asarray(t, dtype=float)
-    offsets = TYPICAL_OFFSETS.copy()
-    lengths0 = estimate_lengths(markers, db.mean_lengths, offsets)
+    lengths0, offsets0, leg_prior = estimate_start(markers, db.mean_lengths, TYPICAL_OFFSETS)
+    offsets = offsets0.copy()
     lengths = lengths0.copy()
     sig_l, sig_o = LENGTH_SIGMA.copy(), OFFSET_SIGMA.copy()
     resid, used = float("nan"), 0
@@ -103,7 +103,7 @@ def calibrate_subject(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = 
         idx, R, o, dirs, resid = _states(markers, t, db, cfg, lengths, offsets, max_frames)
         used = len(idx)
         lengths, offsets, sig_l, sig_o = linear_update(markers[idx], R, o, dirs, lengths0, max(resid, 0.003),
-                                                       decorrelation(t[idx]))
+                                                       decorrelation(t[idx]), offsets0, leg_prior)
         log.debug("subject update: lengths %s offsets %s", np.round(lengths, 4), np.round(offsets, 4))
     subject = Subject(lengths, offsets, sig_o, "skin")
     return CalibrationReport(subject, used, resid, OFFSET_SIGMA.copy())

@@ -35,16 +35,30 @@ CORRELATION_S = 0.2
 #: benchmark clips): the raw sigma (~2 mm) was 4.6x smaller than the rms error (~5 mm);
 #: benchmarks/accuracy.py checks rms(error / sigma) on the CMU clips
 SIGMA_INFLATION = 4.5
+#: standard deviation (m) of one side's lateral knee / ankle offset about the two sides' mean
+LATERAL_ASYMMETRY = 0.003
+#: the standard pose's hip width and lateral leg offsets are held (their prior precision times
+#: this): the solved poses of the motion are biased on exactly these (the pose prior prefers a
+#: leg abduction, and a lateral offset trades against it), and let free the update moved them
+#: ~1 cm the wrong way on simulated takes (tests/recon/test_subject.py's synthetic motion)
+STANDARD_POSE_WEIGHT = 100.0
 
 
 def linear_update(markers: np.ndarray, R: np.ndarray, o: np.ndarray, dirs: np.ndarray, lengths0: np.ndarray,
-                  sigma_data: float, decorrelate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  sigma_data: float, decorrelate: float, offsets0: np.ndarray | None = None,
+                  leg_prior: tuple[np.ndarray, np.ndarray] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One least-squares update of lengths and offsets given solved poses.
 
     markers: (n, 8, 3) world metres (NaN = unseen) of the solved frames; R: (n, 3, 3) torso
     rotations; o: (n, 3) shoulder midpoints (m); dirs: (n, 11, 3) unit bone directions;
     lengths0: (8,) prior centre of the lengths (m); sigma_data: marker error (m); decorrelate:
-    how many frames count as one independent observation (>= 1).
+    how many frames count as one independent observation (>= 1); offsets0: (8, 3) prior centre
+    of the offsets (m, default TYPICAL_OFFSETS); leg_prior: the standard pose's Gaussian of the
+    hip width and the lateral knee / ankle departures (mean (3,), covariance (3, 3); from
+    :func:`.proportions.skin_leg_fit`), which replaces the independent priors of the hip width and
+    the four lateral leg offsets: the motion barely separates them (a lateral offset trades against
+    the hip width and the leg's abduction), the standard pose does.
     Returns lengths (8,), offsets (8, 3), their 1-sigma (8,), (8, 3) (m; offsets' sigma
     inflated by :data:`SIGMA_INFLATION`).
     """
@@ -67,13 +81,22 @@ def linear_update(markers: np.ndarray, R: np.ndarray, o: np.ndarray, dirs: np.nd
     Bc = Bc.reshape(-1, B.shape[-1])
     yc = yc.reshape(-1)
     w = 1.0 / (sigma_data ** 2 * decorrelate)
-    prior_mu = np.concatenate([lengths0, TYPICAL_OFFSETS.reshape(-1)])
+    off0 = TYPICAL_OFFSETS if offsets0 is None else np.asarray(offsets0, dtype=float)
+    prior_mu = np.concatenate([lengths0, off0.reshape(-1)])
     prior_sig = np.concatenate([LENGTH_SIGMA, OFFSET_SIGMA.reshape(-1)])
-    H = w * Bc.T @ Bc + np.diag(1.0 / prior_sig ** 2)
-    g = w * Bc.T @ yc + prior_mu / prior_sig ** 2
+    P = np.diag(1.0 / prior_sig ** 2)
+    if leg_prior is not None and np.all(np.isfinite(leg_prior[1])):
+        idx = [1] + [nl + 3 * i for i in (4, 5, 6, 7)]  # hip width, e1 of the knees and ankles
+        Mmap = np.array([[1, 0, 0], [0, 1, 0], [0, 1, 0], [0, 0, 1], [0, 0, 1]], float)
+        cov = Mmap @ np.asarray(leg_prior[1], float) @ Mmap.T + np.diag([0.0] + [LATERAL_ASYMMETRY ** 2] * 4)
+        P[np.ix_(idx, idx)] = STANDARD_POSE_WEIGHT * np.linalg.inv(cov)
+    H = w * Bc.T @ Bc + P
+    g = w * Bc.T @ yc + P @ prior_mu
     theta = np.linalg.solve(H, g)
     sig = np.sqrt(np.diag(np.linalg.inv(H)))
     sig_o = np.minimum(SIGMA_INFLATION * sig[nl:], OFFSET_SIGMA.reshape(-1))
+    if leg_prior is not None and np.all(np.isfinite(leg_prior[1])):  # held: report the standard pose's sigma
+        sig_o[[3 * i for i in (4, 5, 6, 7)]] = np.minimum(np.sqrt(np.diag(cov)[1:]), OFFSET_SIGMA[4:, 0])
     lengths = np.maximum(theta[:nl], 0.2 * np.asarray(lengths0, float))
     return lengths, theta[nl:].reshape(N_MARKERS, 3), sig[:nl], sig_o.reshape(N_MARKERS, 3)
 
