@@ -30,7 +30,7 @@ from samba_common.calib import Camera, CameraRig, default_rig  # noqa: E402
 from samba_server.calibrate.bundle import transform_rig  # noqa: E402
 from samba_server.calibrate.floor import apply_transform, lframe_transform, triangulate_static  # noqa: E402
 from samba_server.calibrate.selfcal import self_calibrate  # noqa: E402
-from samba_server.calibrate.simwand import (pose_errors, simulate_lframe, simulate_subject,  # noqa: E402
+from samba_server.calibrate.simwand import (pose_errors, simulate_board_step, simulate_lframe, simulate_subject,  # noqa: E402
                                             simulate_wand)
 from samba_server.calibrate.wand import _resolve, calibrate_wand, wand_length_stats  # noqa: E402
 from samba_server.triangulate import TriangulateConfig, Triangulator  # noqa: E402
@@ -67,24 +67,6 @@ def bench_triangulation() -> list[str]:
     return out
 
 
-def board_step(rig: CameraRig, views: int, seed: int) -> CameraRig:
-    """What a user does first: intrinsics from ``views`` rendered 7x5 checkerboard images per
-    camera (``samba-calibrate intrinsics``), with their uncertainties as the wand's priors."""
-    import cv2
-
-    from samba_server.calibrate.intrinsics import Board, detect, intrinsics_covariance, render_board_views
-    from samba_server.calibrate.wand import COV_KEY, STD_KEY
-
-    board = Board.parse("checkerboard:7x5:0.03")
-    cams, meta = [], {}
-    for i, c in enumerate(rig.cameras):
-        found = [f for f in (detect(board, im) for im in render_board_views(c, board, views, seed=seed + i)) if f]
-        objs, imgs = [f[0] for f in found], [f[1].astype(np.float32) for f in found]
-        _, K, d, rv, tv, std, _, _ = cv2.calibrateCameraExtended(objs, imgs, c.size, None, None, flags=cv2.CALIB_FIX_K3)
-        cams.append(Camera(c.name, c.size, K, d.ravel()[:5]))
-        meta[STD_KEY + c.name] = [float(v) for v in std.ravel()[:9]]
-        meta[COV_KEY + c.name] = intrinsics_covariance(objs, imgs, K, d, rv, tv).tolist()
-    return CameraRig(cams, meta)
 
 
 def bench_wand(frames: int, seeds: int, views: int) -> tuple[list[str], CameraRig, CameraRig]:
@@ -103,7 +85,7 @@ def bench_wand(frames: int, seeds: int, views: int) -> tuple[list[str], CameraRi
     agg = []
     for seed in range(seeds):
         obs = simulate_wand(rig, frames, 0.5, noise_px=0.2, seed=seed, fps=20.0)
-        start = board_step(rig, views, 100 * seed)
+        start = simulate_board_step(rig, views, 100 * seed)
         t0 = time.perf_counter()
         est, rep = calibrate_wand(start, obs.uv, [0.0, 0.5])
         dt = time.perf_counter() - t0

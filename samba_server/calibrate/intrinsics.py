@@ -17,7 +17,7 @@ import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import cv2
 import numpy as np
@@ -177,10 +177,20 @@ def intrinsics_covariance(objs: list[np.ndarray], imgs: list[np.ndarray], K: np.
 
 def calibrate_intrinsics(name: str, source: str | os.PathLike, board: Board, step: int = 1,
                          max_views: int = 200, fix_k3: bool = True, progress=None) -> IntrinsicsResult:
-    """Calibrate one camera's K and distortion from board views; raises ValueError when the
-    board was found in fewer than 4 views."""
+    """Calibrate one camera's K and distortion from the board views of a video or image
+    folder (every ``step``-th frame); raises ValueError when the board was found in fewer than
+    4 views."""
+    frames = (img for _, img in iter_frames(source, step))
+    return calibrate_frames(name, frames, board, max_views, fix_k3, progress, what=str(source))
+
+
+def calibrate_frames(name: str, frames: Iterable[np.ndarray], board: Board, max_views: int = 200,
+                     fix_k3: bool = True, progress=None, what: str = "board views") -> IntrinsicsResult:
+    """Calibrate one camera's K and distortion from images (H, W) of the board (at most
+    ``max_views`` of those where it is found, evenly spread); ``what`` names them in errors.
+    Raises ValueError when the board was found in fewer than 4 views."""
     objs, imgs, size, n = [], [], None, 0
-    for _, img in iter_frames(source, step):
+    for img in frames:
         n += 1
         size = (img.shape[1], img.shape[0])
         got = detect(board, img)
@@ -190,9 +200,9 @@ def calibrate_intrinsics(name: str, source: str | os.PathLike, board: Board, ste
         if progress is not None:
             progress(n)
     if size is None:
-        raise ValueError(f"{source}: no frames")
+        raise ValueError(f"{what}: no frames")
     if len(objs) < 4:
-        raise ValueError(f"{source}: board found in {len(objs)} of {n} frames; need >= 4 views at varied angles")
+        raise ValueError(f"{what}: board found in {len(objs)} of {n} frames; need >= 4 views at varied angles")
     if len(objs) > max_views:
         keep = np.linspace(0, len(objs) - 1, max_views).round().astype(int)
         objs, imgs = [objs[k] for k in keep], [imgs[k] for k in keep]

@@ -164,6 +164,24 @@ def write_videos(out_dir: str | os.PathLike, rig: CameraRig, obs: SimObservation
     return paths
 
 
+def simulate_board_step(rig: CameraRig, views: int, seed: int = 0,
+                        board: str = "checkerboard:7x5:0.03") -> CameraRig:
+    """Intrinsics as a user gets them before the wand: ``views`` rendered images of the board
+    per camera of ``rig`` through the board step (as ``samba-calibrate simulate board`` +
+    ``intrinsics``), with its uncertainties in the metadata as the wand step's priors. The
+    returned cameras have no pose."""
+    from .intrinsics import Board, calibrate_frames, render_board_views
+    from .wand import board_priors
+
+    b = Board.parse(board)
+    cams, meta = [], {}
+    for i, c in enumerate(rig.cameras):
+        res = calibrate_frames(c.name, render_board_views(c, b, views, seed=seed + i), b)
+        cams.append(res.camera)
+        meta.update(board_priors(c.name, res.std, res.cov))
+    return CameraRig(cams, meta)
+
+
 def pose_errors(est: CameraRig, true: CameraRig, mode: str = "aligned") -> tuple[np.ndarray, np.ndarray]:
     """Camera centre errors (C,) m and rotation errors (C,) deg of ``est`` against ``true``.
 

@@ -156,7 +156,7 @@ def _rotation_95(res: BundleResult, cov: np.ndarray, G: np.ndarray, centres: np.
     (the rotational part of the least-squares rigid fit of the centre changes ``G dp``).
     cov: (n, n) camera covariance; G: (3 C, n) centre Jacobian; z: (S, 3) standard normals."""
     cams: list[Camera] = res.cameras
-    C, n = len(cams), cov.shape[0]
+    C = len(cams)
     d = centres - centres.mean(axis=0)
     B = np.zeros((3 * C, 6))  # rigid motion: translation (3), rotation (3) of the centres
     for k in range(3):

@@ -53,6 +53,14 @@ STD_KEY = "intrinsics_std_"
 #: ``STD_KEY``; written by ``samba-calibrate intrinsics``); preferred to ``STD_KEY`` as prior
 COV_KEY = "intrinsics_cov_"
 
+
+def board_priors(camera: str, std: np.ndarray, cov: np.ndarray) -> dict[str, list]:
+    """The calibration ``[metadata]`` entries that carry one camera's board-step
+    uncertainties to the wand step: std (9,) and cov (9, 9) in ``STD_KEY`` order."""
+    return {STD_KEY + camera: [float(v) for v in np.ravel(std)[:9]],
+            COV_KEY + camera: [[float(v) for v in row] for row in np.asarray(cov, float)]}
+
+
 #: positions of f (fx), cx, cy, k1, k2 in the board step's 9 parameters
 _BOARD_INDEX = (0, 2, 3, 4, 5)
 

@@ -93,10 +93,9 @@ def cmd_intrinsics(a: argparse.Namespace) -> int:
         rig = rig.replace(cam)
     else:
         rig = CameraRig([cam])
-    from samba_server.calibrate.wand import COV_KEY, STD_KEY
+    from samba_server.calibrate.wand import board_priors
 
-    rig.metadata[STD_KEY + a.camera] = [float(v) for v in res.std]  # priors of the wand step
-    rig.metadata[COV_KEY + a.camera] = [[float(v) for v in row] for row in res.cov]
+    rig.metadata.update(board_priors(a.camera, res.std, res.cov))  # priors of the wand step
     rig.metadata["source"] = "samba-calibrate intrinsics"
     rig.save(out)
     print(f"{a.camera}: rms {res.rms_px:.3f} px from {res.n_views} of {res.n_frames} frames; "

@@ -9,7 +9,8 @@ from samba_common.calib import Camera, CameraRig, default_rig
 from samba_server.calibrate.bundle import transform_rig
 from samba_server.calibrate.floor import apply_transform, lframe_transform, standard_pose_transform, triangulate_static
 from samba_server.calibrate.selfcal import self_calibrate
-from samba_server.calibrate.simwand import (pose_errors, simulate_lframe, simulate_subject, simulate_wand)
+from samba_server.calibrate.simwand import (pose_errors, simulate_board_step, simulate_lframe, simulate_subject,
+                                            simulate_wand)
 from samba_server.calibrate.wand import CalibrateError, calibrate_wand
 from samba_server.triangulate import TriangulateConfig, Triangulator
 
@@ -227,26 +228,6 @@ def test_self_calibration_undoes_mirrored_labels(mirrored) -> None:
     assert ce.max() < 0.1 and re.max() < 1.0
 
 
-def _board_rig(rig: CameraRig, views: int = 30, seed: int = 0) -> CameraRig:
-    """Intrinsics as a user gets them: the board step on rendered checkerboard images, with
-    the board step's uncertainties in the metadata (the wand step's priors)."""
-    import cv2
-
-    from samba_server.calibrate.intrinsics import Board, detect, intrinsics_covariance, render_board_views
-    from samba_server.calibrate.wand import COV_KEY, STD_KEY
-
-    board = Board.parse("checkerboard:7x5:0.03")
-    cams, meta = [], {}
-    for i, c in enumerate(rig.cameras):
-        found = [detect(board, im) for im in render_board_views(c, board, views, seed=seed + i)]
-        found = [f for f in found if f is not None]
-        objs, imgs = [f[0] for f in found], [f[1].astype(np.float32) for f in found]
-        _, K, d, rv, tv, std, _, _ = cv2.calibrateCameraExtended(objs, imgs, c.size, None, None, flags=cv2.CALIB_FIX_K3)
-        cams.append(Camera(c.name, c.size, K, d.ravel()[:5]))
-        meta[STD_KEY + c.name] = [float(v) for v in std.ravel()[:9]]
-        meta[COV_KEY + c.name] = intrinsics_covariance(objs, imgs, K, d, rv, tv).tolist()
-    return CameraRig(cams, meta)
-
 
 def test_bundle_adjustment_refines_intrinsics_with_priors() -> None:
     """A focal length 1 % off (cam1) and a principal point 1.5 px off (cam2) are pulled back
@@ -293,7 +274,7 @@ def test_reported_uncertainty_covers_the_true_error() -> None:
     rig = default_rig(4)
     ratios, scale_z = [], []
     for seed in range(3):
-        start = _board_rig(rig, 30, seed=10 * seed)
+        start = simulate_board_step(rig, 30, seed=10 * seed)
         obs = simulate_wand(rig, 600, 0.5, noise_px=0.2, seed=seed, fps=10.0)
         out, rep = calibrate_wand(start, obs.uv, [0.0, 0.5])
         ce, _ = pose_errors(out, rig)
