@@ -422,13 +422,14 @@ class Labeller:
                t: float) -> tuple[np.ndarray, LabelQuality] | None:
         """Check the tracked names of this frame against a fresh identification, every
         ``audit_interval`` s while a point that is surely a marker (>= 3 views, or no view
-        missing it) and not a static reflection stays unnamed: tracking that went wrong (a wrist that took its shoulder's
-        point, a leg named for the other) keeps itself wrong, a fresh look does not. The
-        identification, which counts each name it shares with tracking as evidence
-        (``audit_agree``), replaces the tracked names when it is clear (``min_margin`` over
-        every rival) and scores ``audit_margin`` more than they do (``audit_extend_margin``
-        when it only adds names: a wrist whose track and skeleton lost it), or names >= 2 more
-        markers where the tracked names lack a shoulder. tracked_out: (8, 3) the tracked names. Returns (8, 3) markers and quality, or None."""
+        missing it) and not a static reflection stays unnamed: tracking that went wrong (a
+        wrist that took its shoulder's point, a leg named for the other) keeps itself wrong, a
+        fresh look does not. The identification, which counts each name it shares with
+        tracking as evidence (``audit_agree``), replaces the tracked names when it is clear
+        (``min_margin`` over every rival) and scores ``audit_margin`` more than they do
+        (``audit_extend_margin`` when it only adds names: a wrist whose track and skeleton lost
+        it), or names >= 2 more markers where the tracked names lack a shoulder.
+        tracked_out: (8, 3) the tracked names. Returns (8, 3) markers and quality, or None."""
         cfg = self.config
         assign = self._assign
         free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
@@ -449,8 +450,7 @@ class Labeller:
         extends = not (_disputed(assign, [best]) & (assign >= 0)).any()
         if extends and np.count_nonzero(best.labels >= 0) <= np.count_nonzero(assign >= 0):
             return None
-        rivals = [h.score for h in hyps[1:] if (_disputed(best.labels, [h]) & (best.labels >= 0)).any()]
-        margin = best.score - max(rivals) if rivals else best.score
+        margin = _margin(best.labels, best.score, hyps[1:])
         if margin < cfg.min_margin:
             return None
         tracked = score_labels(pts.X, trust, self._body, hint, assign, pts.merged_all)
@@ -519,8 +519,7 @@ class Labeller:
                     return None
                 labels = best.labels.copy()
         self._t_ambiguous = None
-        rivals = [h.score for h in hyps[1:] if (_disputed(labels, [h]) & (labels >= 0)).any()]
-        margin = best.score - max(rivals) if rivals else best.score
+        margin = _margin(labels, best.score, hyps[1:])
         out = self._named(pts, labels, best.facing)
         named = labels >= 0
         self.stats.identifications += 1
@@ -601,6 +600,13 @@ def _disputed(labels: np.ndarray, rivals: list) -> np.ndarray:
             if any(other[n] == labels[m] and labels[n] != labels[m] for n in range(N_MARKERS)):
                 out[m] = True
     return out
+
+
+def _margin(labels: np.ndarray, score: float, rivals: list) -> float:
+    """How much a labelling (8,) scoring ``score`` leads the best of the rival hypotheses that
+    dispute one of its names (its score when none does)."""
+    scores = [h.score for h in rivals if (_disputed(labels, [h]) & (labels >= 0)).any()]
+    return score - max(scores) if scores else score
 
 
 def _two_in_one(pts: Points3D, p: int) -> bool:
