@@ -72,7 +72,7 @@ def bench_triangulation() -> list[str]:
 def bench_wand(frames: int, seeds: int, views: int) -> tuple[list[str], CameraRig, CameraRig]:
     from samba_server.calibrate.uncertainty import rig_scale
 
-    out = [f"Intrinsics from the board step first ({views} rendered 7x5 x 3 cm checkerboard views per camera, "
+    out = [f"Intrinsics from the board step first ({views} rendered 7x5 x 3 cm checkerboard frames per camera, "
            "as `samba-calibrate simulate board` + `intrinsics`), then the wand refines them (focal length, "
            "principal point, k1, k2). Centre errors after the best rigid alignment; reported = the 95 % "
            "radius from the adjustment's covariance.", "",
@@ -184,7 +184,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=2400, help="wand positions per take")
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--views", type=int, default=60, help="board views per camera in the intrinsics step")
+    ap.add_argument("--views", type=int, default=600, help="board frames per camera in the intrinsics step "
+                    "(as `samba-calibrate simulate board`; about 2/3 show the whole board)")
     ap.add_argument("--seconds", type=float, default=10.0, help="reconstruction clip length")
     ap.add_argument("--no-record", action="store_true", help="do not write docs/BENCHMARKS.md")
     args = ap.parse_args()

@@ -26,6 +26,13 @@ from samba_common.calib import Camera
 
 log = logging.getLogger(__name__)
 
+#: board views used at most (evenly spread over those found). The principal point, which sets
+#: each camera's rotation in the wand step (1 px ~ 0.4 deg at fx 140), needs them: on rendered
+#: 160x120 boards its error is ~0.3-0.5 px from 40 views, ~0.1-0.2 px from 400, and the wand
+#: calibration's rotations go from 0.14-0.22 deg to <= 0.074 deg (benchmarks/calibration.py).
+#: OpenCV's dense adjustment grows fast with the views: ~1.7 s for 200, ~12 s for 400, ~30 s for 500.
+MAX_VIEWS = 500
+
 _IMAGE_EXT = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm"}
 
 
@@ -176,7 +183,7 @@ def intrinsics_covariance(objs: list[np.ndarray], imgs: list[np.ndarray], K: np.
 
 
 def calibrate_intrinsics(name: str, source: str | os.PathLike, board: Board, step: int = 1,
-                         max_views: int = 200, fix_k3: bool = True, progress=None) -> IntrinsicsResult:
+                         max_views: int = MAX_VIEWS, fix_k3: bool = True, progress=None) -> IntrinsicsResult:
     """Calibrate one camera's K and distortion from the board views of a video or image
     folder (every ``step``-th frame); raises ValueError when the board was found in fewer than
     4 views."""
@@ -184,7 +191,7 @@ def calibrate_intrinsics(name: str, source: str | os.PathLike, board: Board, ste
     return calibrate_frames(name, frames, board, max_views, fix_k3, progress, what=str(source))
 
 
-def calibrate_frames(name: str, frames: Iterable[np.ndarray], board: Board, max_views: int = 200,
+def calibrate_frames(name: str, frames: Iterable[np.ndarray], board: Board, max_views: int = MAX_VIEWS,
                      fix_k3: bool = True, progress=None, what: str = "board views") -> IntrinsicsResult:
     """Calibrate one camera's K and distortion from images (H, W) of the board (at most
     ``max_views`` of those where it is found, evenly spread); ``what`` names them in errors.

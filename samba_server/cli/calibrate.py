@@ -104,6 +104,10 @@ def cmd_intrinsics(a: argparse.Namespace) -> int:
           f" dist {np.array2string(cam.dist, precision=4)}")
     print(f"  95 % uncertainty: focal length +-{1.96 * res.std[0]:.2f} px, principal point "
           f"+-{1.96 * max(res.std[2], res.std[3]):.2f} px (the wand step refines them)")
+    rot = np.degrees(np.arctan(1.96 * max(res.std[2], res.std[3]) / cam.matrix[0, 0]))
+    if rot > 0.1:  # the principal point and the camera's rotation trade against each other
+        print(f"  note: the principal point leaves the camera's rotation uncertain by +-{rot:.2f} deg; "
+              "more views (a longer board video, 300+ found) narrow it")
     if res.coverage < 0.5:
         print("  warning: corners cover less than half of the image; move the board into the corners")
     print(f"wrote {out}")
@@ -197,7 +201,7 @@ def cmd_simulate(a: argparse.Namespace) -> int:
         for cam in rig.cameras:
             d = out / cam.name
             d.mkdir(exist_ok=True)
-            for i, img in enumerate(render_board_views(cam, board, a.frames or 60, seed=a.seed)):
+            for i, img in enumerate(render_board_views(cam, board, a.frames or 600, seed=a.seed)):
                 cv2.imwrite(str(d / f"board_{i:03d}.png"), img)
         print(f"wrote board images per camera under {out}")
         return 0
@@ -278,7 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("kind", choices=["wand", "lframe", "board", "subject"])
     s.add_argument("--out", required=True, help="output directory")
     s.add_argument("--cameras", type=int, default=4, choices=[2, 4])
-    s.add_argument("--frames", type=int, default=0, help="frames (default: wand 600, lframe 60, board 60 views per camera)")
+    s.add_argument("--frames", type=int, default=0, help="frames (default: wand 600, lframe 60, board 600 views per camera)")
     s.add_argument("--seconds", type=float, default=8.0, help="subject take length")
     s.add_argument("--noise", type=float, default=0.2, help="pixel noise sigma")
     s.add_argument("--wand", type=float, default=0.5)
