@@ -15,9 +15,9 @@ Per frame (:func:`reconstruct_points`):
    are never closer than ``min_separation_m``.
 
 A view is *unexplained* for a point when the point projects inside that camera's image and
-no blob is there: the marker is hidden (the body, the edge of the volume) or the point is a
-ghost. Points seen by >= 3 views are not ghosts; 2-view points carry their unexplained count
-so that the naming stage can trust them less.
+no blob is there (a merged blob near it explains it): the marker is hidden (the body, the edge
+of the volume) or the point is a ghost. Points seen by >= 3 views are not ghosts; 2-view points
+carry their unexplained count so that the naming stage can trust them less.
 
 Cost: one vectorised pass per camera pair over (N_a x N_b) blobs and one triangulation of all
 candidates, so 20 blobs per view in 4 views stays near a millisecond.
@@ -181,11 +181,17 @@ class PointReconstructor:
             uv[c, good] = v.uv[near[good]]
         res = self.tri.triangulate(uv)
         used = res.used & (blob >= 0)
+        # a merged blob the triangulation dropped (its centroid lies between two markers)
+        # still explains the view: the marker is in it, not missing
+        in_merged = np.zeros((C, K), bool)
+        for c in range(C):
+            has = blob[c] >= 0
+            in_merged[c, has] = views[c].capacity[blob[c, has]] > 1
         blob = np.where(used, blob, -1)
         X, err, n_views = res.points, res.error, used.sum(axis=0)
         ok = (n_views >= 2) & self._plausible(X)
         # greedy acceptance, best first
-        missing = (inside & (blob < 0)).sum(axis=0)
+        missing = (inside & (blob < 0) & ~in_merged).sum(axis=0)
         order = np.lexsort((np.nan_to_num(err, nan=1e9), missing, -n_views))
         cap = [v.capacity.copy() for v in views]
         seen: set[tuple] = set()
