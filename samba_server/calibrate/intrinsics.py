@@ -30,7 +30,8 @@ log = logging.getLogger(__name__)
 #: each camera's rotation in the wand step (1 px ~ 0.4 deg at fx 140), needs them: on rendered
 #: 160x120 boards its error is ~0.3-0.5 px from 40 views, ~0.1-0.2 px from 400, and the wand
 #: calibration's rotations go from 0.14-0.22 deg to <= 0.074 deg (benchmarks/calibration.py).
-#: OpenCV's dense adjustment grows fast with the views: ~1.7 s for 200, ~12 s for 400, ~30 s for 500.
+#: OpenCV's dense adjustment grows fast with the views: ~1.7 s for 200, ~12 s for 400 (with the
+#: detection in 600 frames, one camera).
 MAX_VIEWS = 500
 
 _IMAGE_EXT = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm"}

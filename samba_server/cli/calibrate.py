@@ -102,9 +102,10 @@ def cmd_intrinsics(a: argparse.Namespace) -> int:
           f"coverage {res.coverage * 100:.0f} % of the image (8x6 cells)")
     print(f"  fx {cam.matrix[0, 0]:.2f} fy {cam.matrix[1, 1]:.2f} cx {cam.matrix[0, 2]:.2f} cy {cam.matrix[1, 2]:.2f}"
           f" dist {np.array2string(cam.dist, precision=4)}")
+    pp95 = 1.96 * max(res.std[2], res.std[3])  # px
     print(f"  95 % uncertainty: focal length +-{1.96 * res.std[0]:.2f} px, principal point "
-          f"+-{1.96 * max(res.std[2], res.std[3]):.2f} px (the wand step refines them)")
-    rot = np.degrees(np.arctan(1.96 * max(res.std[2], res.std[3]) / cam.matrix[0, 0]))
+          f"+-{pp95:.2f} px (the wand step refines them)")
+    rot = np.degrees(np.arctan(pp95 / cam.matrix[0, 0]))
     if rot > 0.1:  # the principal point and the camera's rotation trade against each other
         print(f"  note: the principal point leaves the camera's rotation uncertain by +-{rot:.2f} deg; "
               "more views (a longer board video, 300+ found) narrow it")

@@ -162,6 +162,9 @@ class PointReconstructor:
         K = len(X)
         blob = np.full((C, K), -1, np.int64)
         inside = np.zeros((C, K), bool)
+        # the view's nearest blob is merged: if the triangulation drops it (its centroid lies
+        # between two markers) it still explains the view, the marker is in it, not missing
+        in_merged = np.zeros((C, K), bool)
         for c in range(C):
             cam = self.rig.cameras[c]
             proj = cam.project(X)
@@ -177,16 +180,11 @@ class PointReconstructor:
             near = np.argmin(d, axis=1)
             good = (d[np.arange(K), near] <= cfg.support_px) & (depth > 0.1)
             blob[c, good] = near[good]
+            in_merged[c, good] = v.capacity[near[good]] > 1
             uv[c] = np.nan
             uv[c, good] = v.uv[near[good]]
         res = self.tri.triangulate(uv)
         used = res.used & (blob >= 0)
-        # a merged blob the triangulation dropped (its centroid lies between two markers)
-        # still explains the view: the marker is in it, not missing
-        in_merged = np.zeros((C, K), bool)
-        for c in range(C):
-            has = blob[c] >= 0
-            in_merged[c, has] = views[c].capacity[blob[c, has]] > 1
         blob = np.where(used, blob, -1)
         X, err, n_views = res.points, res.error, used.sum(axis=0)
         ok = (n_views >= 2) & self._plausible(X)
