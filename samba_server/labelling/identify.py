@@ -36,6 +36,9 @@ _LATERAL_W, _LATERAL_M = 4.0, 0.03
 #: shoulders more than _TILT_M m apart in height cost _TILT_W per metre (a wrist at shoulder
 #: height a shoulder width away is not a shoulder)
 _TILT_W, _TILT_M = 10.0, 0.06
+#: an ankle named without its knee more than _HIGH_ANKLE_M m above the floor costs
+#: _HIGH_ANKLE_W per metre
+_HIGH_ANKLE_W, _HIGH_ANKLE_M = 2.0, 0.25
 #: a knee nearer its shoulder than _NEAR_F trunks costs _NEAR_W per metre (at most 2)
 _NEAR_W, _NEAR_F = 8.0, 0.75
 
@@ -84,7 +87,11 @@ def _leg_penalty(X: np.ndarray, s: np.ndarray, k: int, a: int, body: Body) -> fl
     if k < 0:
         if a < 0:
             return 0.0
-        return 0.0 if np.linalg.norm(X[a] - s) <= reach_a and X[a, 2] < s[2] - 0.6 else None
+        if np.linalg.norm(X[a] - s) > reach_a or X[a, 2] >= s[2] - 0.6:
+            return None
+        # an ankle whose knee is not named stays near the floor: a point at knee height named
+        # an ankle (leaving the real ankle below it unnamed) costs
+        return _HIGH_ANKLE_W * max(0.0, float(X[a, 2]) - _HIGH_ANKLE_M)
     dk = float(np.linalg.norm(X[k] - s))
     if dk > reach_k or X[k, 2] > s[2] - 0.2:
         return None
@@ -115,8 +122,9 @@ def _leg_options(X: np.ndarray, free: list[int], s: np.ndarray, body: Body) -> l
             if pen is not None:
                 out.append((k, a, pen))
     for a in free:
-        if _leg_penalty(X, s, -1, a, body) is not None:
-            out.append((-1, a, 0.0))
+        pen_a = _leg_penalty(X, s, -1, a, body)
+        if pen_a is not None:
+            out.append((-1, a, pen_a))
     return out
 
 

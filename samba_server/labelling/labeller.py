@@ -280,11 +280,19 @@ class Labeller:
         if self._facing is not None and t - self._t_facing <= 0.5:
             right = _right(self._facing)
         if right is not None:
-            # legs do not cross: a right knee (ankle) well to the left of the left one is a swap
-            for lm, rm in ((LK, RK), (LA, RA)):
-                if assign[lm] >= 0 and assign[rm] >= 0 and assign[lm] != assign[rm] and \
-                        float((out[rm] - out[lm]) @ right) < -cfg.crossed_m:
-                    assign[[lm, rm]], arow[[lm, rm]], out[[lm, rm]] = assign[[rm, lm]], arow[[rm, lm]], out[[rm, lm]]
+            # legs do not cross: a right knee (ankle) well to the left of the left one is a swap,
+            # unless swapping it makes the shins fit worse (feet staggered in a stance turned
+            # against the shoulders put the right ankle left of the left one, the knees not)
+            crossed = [(lm, rm) for lm, rm in ((LK, RK), (LA, RA))
+                       if assign[lm] >= 0 and assign[rm] >= 0 and assign[lm] != assign[rm]
+                       and float((out[rm] - out[lm]) @ right) < -cfg.crossed_m]
+            if crossed:
+                swapped = out.copy()
+                for lm, rm in crossed:
+                    swapped[[lm, rm]] = out[[rm, lm]]
+                if _shin_misfit(self._body, swapped) <= _shin_misfit(self._body, out) + 0.02:
+                    for lm, rm in crossed:
+                        assign[[lm, rm]], arow[[lm, rm]], out[[lm, rm]] = assign[[rm, lm]], arow[[rm, lm]], out[[rm, lm]]
         _split_shared(out, assign, pred, cfg.merged_half_m, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
         self._assign = assign
@@ -590,13 +598,14 @@ _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
 
 def _disputed(labels: np.ndarray, rivals: list) -> np.ndarray:
     """(8,) bool: markers whose point (labels (8,), -1 = unnamed) some rival labelling names
-    differently: it gives the marker another point, or gives the point to another marker.
-    A rival that leaves a marker unnamed does not dispute it."""
+    differently: it gives the marker another point, or gives the point to another marker
+    instead. A rival that leaves a marker unnamed, or names its point for it and another
+    marker too (a merged point), does not dispute it."""
     out = np.zeros(N_MARKERS, bool)
     for h in rivals:
         other = h.labels
         out |= (other >= 0) & (other != labels)
-        for m in np.flatnonzero(labels >= 0):
+        for m in np.flatnonzero((labels >= 0) & (other != labels)):
             if any(other[n] == labels[m] and labels[n] != labels[m] for n in range(N_MARKERS)):
                 out[m] = True
     return out
@@ -609,10 +618,18 @@ def _margin(labels: np.ndarray, score: float, rivals: list) -> float:
     return score - max(scores) if scores else score
 
 
+def _shin_misfit(body: Body, markers: np.ndarray) -> float:
+    """Sum over the legs with knee and ankle named in markers (8, 3) (NaN = unnamed) of how
+    far (m) their distance is from the shin."""
+    named = np.isfinite(markers).all(axis=1)
+    return sum(body.shin_error(markers[k], markers[a]) for k, a in ((LK, LA), (RK, RA)) if named[k] and named[a])
+
+
 def _two_in_one(pts: Points3D, p: int) -> bool:
     """Point p may hold two markers: its blobs are double-sized everywhere, or merged in all
     its views but at most one."""
-    return bool(pts.merged_all[p]) or (pts.n_merged[p] >= 2 and pts.n_merged[p] >= pts.n_views[p] - 1)
+    return bool(pts.merged_all[p]) or (not pts.mirrored[p] and pts.n_merged[p] >= 2
+                                       and pts.n_merged[p] >= pts.n_views[p] - 1)
 
 
 def _right(facing: np.ndarray) -> np.ndarray:

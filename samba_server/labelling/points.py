@@ -63,7 +63,9 @@ class Points3D:
     merged blob; merged_all: (P,) the point's blobs are about twice the size of a single
     marker's at that distance in every view (median over views of area x depth^2, against the
     frame's typical point), so it is likely the midpoint of two markers no view separates;
-    n_merged: (P,) views that saw it in a merged blob.
+    n_merged: (P,) views that saw it in a merged blob; mirrored: (P,) the point was seen only in
+    blobs it shares with one other point and was placed by reflection (see
+    :meth:`PointReconstructor._mirror`).
     """
 
     X: np.ndarray
@@ -75,6 +77,7 @@ class Points3D:
     merged: np.ndarray
     merged_all: np.ndarray
     n_merged: np.ndarray
+    mirrored: np.ndarray
 
     def __len__(self) -> int:
         return len(self.X)
@@ -83,7 +86,7 @@ class Points3D:
     def empty(n_cameras: int) -> "Points3D":
         return Points3D(np.zeros((0, 3)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64),
                         np.zeros((n_cameras, 0), np.int64), np.zeros((0, 8), np.int64), np.zeros(0, bool),
-                        np.zeros(0, bool), np.zeros(0, np.int64))
+                        np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, bool))
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -221,6 +224,7 @@ class PointReconstructor:
             return Points3D.empty(C)
         idx = np.array(keep)
         self._unshare(idx, X, err, n_views, blob, uv)
+        mirrored = self._mirror(idx, X, err, blob, uv, views)
         blob = blob[:, idx]
         votes = np.zeros((len(idx), 8), np.int64)
         n_merged = np.zeros(len(idx), np.int64)
@@ -244,8 +248,9 @@ class PointReconstructor:
             ref = ref[np.isfinite(ref)]
             if ref.size:
                 merged_all = med >= cfg.double_size_ratio * percentile(ref, 40.0)
+        merged_all &= ~mirrored
         return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing[idx].astype(np.int64), blob,
-                        votes, n_merged > 0, merged_all, n_merged)
+                        votes, n_merged > 0, merged_all, n_merged, mirrored)
 
     def _unshare(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
                  uv: np.ndarray) -> None:
@@ -263,6 +268,47 @@ class PointReconstructor:
                     keep_blob = blob[:, k].copy()
                     if self._reduce(int(k), [c], X, err, n_views, blob, uv):
                         blob[:, k] = keep_blob
+
+    def _mirror(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, blob: np.ndarray, uv: np.ndarray,
+                views: list[ViewBlobs]) -> np.ndarray:
+        """A marker hidden behind another in every view that sees it (a wrist passing in front
+        of its shoulder, a knee behind the other) makes an accepted point k seen only in merged
+        blobs, each of which holds one other point j (j uses the blob or projects inside it).
+        The merged centroids lie halfway between the two markers, so k sits at their midpoint,
+        not on the hidden marker: 7-20 cm off. When j has >= 2 views of its own (unmerged
+        blobs), j is triangulated from those and k reflected through the midpoint, 2 X_k - X_j
+        (about 1 cm off on rendered takes). X, err updated in place (candidate indices);
+        returns (len(idx),) bool, the mirrored points."""
+        out = np.zeros(len(idx), bool)
+        proj: dict[int, np.ndarray] = {}
+        for r, k in enumerate(idx):
+            cs = np.flatnonzero(blob[:, k] >= 0)
+            if not all(views[c].capacity[blob[c, k]] > 1 for c in cs):
+                continue
+            inside = np.ones(len(idx), bool)
+            inside[r] = False
+            for c in cs:
+                if c not in proj:
+                    proj[c] = self.rig.cameras[c].project(X[idx])
+                b = blob[c, k]
+                near = np.linalg.norm(proj[c] - views[c].uv[b], axis=1) <= views[c].radius[b] + self.config.support_px
+                inside &= (blob[c, idx] == b) | near
+            if np.count_nonzero(inside) != 1:
+                continue
+            j = int(idx[np.flatnonzero(inside)[0]])
+            own = [c for c in np.flatnonzero(blob[:, j] >= 0) if views[c].capacity[blob[c, j]] <= 1]
+            if len(own) < 2:
+                continue
+            sub = np.full((self.C, 1, 2), np.nan)
+            sub[own, 0] = uv[own, j]
+            res = self.tri.triangulate(sub)
+            reflected = 2.0 * X[k] - res.points[0]
+            if res.n_views[0] < 2 or not self._plausible(reflected[None])[0]:
+                continue
+            X[k] = reflected
+            X[j], err[j] = res.points[0], res.error[0]
+            out[r] = True
+        return out
 
     def _reduce(self, k: int, drop: list[int], X: np.ndarray, err: np.ndarray, n_views: np.ndarray,
                 blob: np.ndarray, uv: np.ndarray) -> bool:

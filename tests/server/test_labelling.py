@@ -246,3 +246,57 @@ def test_a_merged_blob_explains_the_view_of_a_two_view_point():
     d1 = np.linalg.norm(rig.cameras[1].project(a[None]) - rig.cameras[1].project(b[None]))
     assert d1 > 3.0, "the test needs a and b apart in cam1 for the merged centroid to be off"
     assert got.n_views[k] == 2 and got.unexplained[k] == 1
+
+
+def test_a_marker_hidden_behind_another_in_every_view_is_placed_by_reflection():
+    """A wrist passing in front of its shoulder: two views see the shoulder alone (the wrist
+    hidden), the other two see one merged blob of both. The point triangulated from the merged
+    blobs lies halfway between the markers (8 cm off the wrist here, 17 cm on a rendered punch);
+    reflected through the shoulder triangulated from its own views it lands on the wrist."""
+    rig = default_rig(4)
+    pr = PointReconstructor(rig, Triangulator(rig))
+    shoulder, wrist = np.array([0.2, 0.0, 1.5]), np.array([0.2, 0.0, 1.34])
+    others = np.array([[-0.2, 0.0, 1.5], [-0.3, 0.1, 1.2], [-0.1, 0.0, 0.5], [0.1, 0.0, 0.5]])
+    packets = []
+    for c, cam in enumerate(rig.cameras):
+        uv, area = [cam.project(others)], [np.full(len(others), 9)]
+        if c in (1, 3):  # shoulder and wrist in one blob
+            uv.append(cam.project(np.stack([shoulder, wrist])).mean(axis=0, keepdims=True))
+            area.append([20])
+        else:  # the wrist hidden
+            uv.append(cam.project(shoulder[None]))
+            area.append([9])
+        uv, area = np.vstack(uv).astype(np.float32), np.concatenate(area).astype(np.uint16)
+        packets.append(MarkerPacket(cam.name, 0, 0, 160, 120, 100, np.full(len(uv), UNLABELLED, np.uint8), uv, area,
+                                    np.zeros(len(uv), np.uint8)))
+    sep = [np.linalg.norm(np.subtract(*rig.cameras[c].project(np.stack([shoulder, wrist])))) for c in (1, 3)]
+    assert min(sep) > 4.0, "the test needs the markers apart in the merged views"
+    got = pr.reconstruct([view_blobs(p) for p in packets])
+    s = int(np.argmin(np.linalg.norm(got.X - shoulder, axis=1)))
+    w = int(np.argmin(np.linalg.norm(got.X - wrist, axis=1)))
+    assert s != w
+    assert np.linalg.norm(got.X[s] - shoulder) < 0.005
+    assert np.linalg.norm(got.X[w] - wrist) < 0.015
+    assert got.mirrored[w] and not got.merged_all[w]
+
+
+def test_feet_staggered_in_a_turned_stance_keep_their_names():
+    """A fighting stance: shoulders square to +Y, hips turned, the left foot forward and the
+    right one back so far that the right ankle ends up left of the left ankle along the
+    shoulders (the knees not). The legs do not cross; no ankle may be swapped or dropped."""
+    rig = default_rig(4)
+    shin = float(DEFAULT_LENGTHS[7])  # BONE_TYPES: shin
+    start = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    end = start.copy()
+    lk, rk = np.array([-0.12, 0.18, 0.50]), np.array([0.06, -0.16, 0.50])
+    end[4], end[5] = lk, rk
+    for k, a, d in ((4, 6, (0.14, 0.10)), (5, 7, (-0.14, -0.12))):  # ankles a shin below, forward / back
+        v = np.array([d[0], d[1], -np.sqrt(shin ** 2 - d[0] ** 2 - d[1] ** 2)])
+        end[a] = end[k] + v
+    right_axis = np.array([1.0, 0.0, 0.0])
+    assert (end[7] - end[6]) @ right_axis < -0.06 < (end[5] - end[4]) @ right_axis
+    w = np.clip((np.arange(150) / FPS - 0.5) / 1.0, 0.0, 1.0)[:, None, None]
+    truth = (1 - w) * start[None] + w * end[None]
+    named = _run(Labeller(rig), rig, truth, np.random.default_rng(3))
+    right = _right(named, truth)
+    assert right[20:].all(), np.argwhere(~right[20:])[:5]
