@@ -25,7 +25,10 @@ class TakeScore:
     frames: frames scored (outside blackouts, >= 1 visible marker); correct: share of them
     with every visible marker named right and no wrong name; wrong_frames: frames with a wrong
     name; confident_wrong: share of confident frames (a pose solved from >= 4 named markers, not
-    bridged across missing markers) with a joint more than 20 cm off;
+    bridged across missing markers) with a joint more than 20 cm off; confident_wrong_marker: the
+    same for the 8 joints that carry a marker (the solver fits those to the markers within a few
+    cm, so one 20 cm off was put there by a wrong name; the other joints also carry what the
+    solver alone gets wrong);
     solved: share of frames outside blackouts with a pose; reacquire_s: per blackout, the time
     from the markers' return to the first frame with >= 6 markers named right (NaN if never);
     blackout_pose_s: the longest time into a blackout with a pose still output; mpjpe_m: mean
@@ -36,6 +39,7 @@ class TakeScore:
     correct: float = float("nan")
     wrong_frames: int = 0
     confident_wrong: float = float("nan")
+    confident_wrong_marker: float = float("nan")
     solved: float = float("nan")
     reacquire_s: list[float] = field(default_factory=list)
     blackout_pose_s: float = 0.0
@@ -79,7 +83,9 @@ def score_take(markers: np.ndarray, joints: np.ndarray, truth_joints: np.ndarray
     s.solved = float(solved[outside].mean()) if outside.any() else float("nan")
     confident = solved & (named.sum(axis=1) >= 4)
     if confident.any():
-        s.confident_wrong = float((np.nanmax(np.where(solved[:, None], err, 0.0), axis=1) > 0.2)[confident].mean())
+        far = np.where(solved[:, None], err, 0.0) > 0.2
+        s.confident_wrong = float(far.any(axis=1)[confident].mean())
+        s.confident_wrong_marker = float(far[:, list(MARKER_JOINT)].any(axis=1)[confident].mean())
     motion = solved.copy()
     motion[:n_lead] = False
     if motion.any():
