@@ -300,3 +300,20 @@ def test_feet_staggered_in_a_turned_stance_keep_their_names():
     named = _run(Labeller(rig), rig, truth, np.random.default_rng(3))
     right = _right(named, truth)
     assert right[20:].all(), np.argwhere(~right[20:])[:5]
+
+
+def test_a_knee_is_not_taken_for_an_ankle_whose_knee_is_unnamed():
+    """After a blackout the left ankle is a 2-view point one view misses (trusted less). A rival
+    naming the left knee's point as the ankle, knee unnamed, used to come within 0.1 of the
+    right labelling, so identification left both legs unnamed and tracking later named them
+    wrongly. An ankle without its knee stays near the floor: that rival is clearly worse."""
+    from samba_server.labelling.identify import Hint, identify
+    from samba_server.labelling.rigid import LA, LK, Body
+    X = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    X[2], X[3] = X[0] + [-0.05, 0.1, -0.5], X[1] + [0.05, 0.1, -0.5]  # arms down
+    trust = np.zeros(8)
+    trust[LA] = 0.9
+    hyps = identify(X, trust, Body.from_lengths(np.asarray(DEFAULT_LENGTHS)), Hint(np.array([0.0, 1.0]), 3.0))
+    assert (hyps[0].labels == np.arange(8)).all()
+    knee_as_ankle = [h.score for h in hyps if h.labels[LA] == LK and h.labels[LK] < 0]
+    assert knee_as_ankle and hyps[0].score - max(knee_as_ankle) >= 0.6
