@@ -6,10 +6,8 @@
 2. **tracking**: each marker is predicted (its track at constant velocity while it was seen
    recently, else the reconstructed skeleton's joint, which the solver keeps moving with the
    body) and the points are named by an optimal assignment (Hungarian) of points to predicted
-   markers within a gate that grows with the time since the marker was seen; a point also
-   costs for how far it is off a rigid distance (shoulder width, shin) to its partner's
-   prediction. The motes' labels lower the cost of agreeing assignments a little: evidence,
-   not orders. Crossed legs are
+   markers within a gate that grows with the time since the marker was seen. The motes' labels
+   lower the cost of agreeing assignments a little: evidence, not orders. Crossed legs are
    swapped back; assignments that break a rigid distance of the subject (:mod:`.rigid`) or turn
    the facing faster than a body turns are dropped; markers left out are recovered from the
    free points where their prediction or the rigid lengths put them, when the choice is clear;
@@ -64,7 +62,6 @@ class LabelConfig:
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
     max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast ...
     turn_slack_deg: float = 45.0  #: ... plus this much (noise of the shoulder points) between labellings
-    rigid_w: float = 0.5  #: cost per metre a point as a marker is off a rigid distance to its partner's prediction
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
     track_timeout: float = 0.12  #: a marker unseen for longer is predicted from the skeleton
     skeleton_max_age: float = 0.4  #: the skeleton predicts markers up to this long after the last solved pose
@@ -248,7 +245,7 @@ class Labeller:
         d_eff = np.maximum(d - half, 0.0)
         ghostly = np.where(pts.n_views[row_pt] < 3, np.minimum(pts.unexplained[row_pt], 2), 0)
         cost = d_eff - cfg.hint_m * pts.votes[row_pt] + cfg.merged_m * pts.merged[row_pt, None] \
-            + cfg.unexplained_m * ghostly[:, None] + cfg.rigid_w * self._rigid_cost(X, pred)
+            + cfg.unexplained_m * ghostly[:, None]
         ok = np.isfinite(d) & (d_eff <= gate[None, :])
         big = 1e3
         full = np.full((Pr, N_MARKERS + Pr), big)
@@ -329,21 +326,6 @@ class Labeller:
         self.stats.overridden += over
         resid = float(np.sqrt(np.mean(d_eff[arow[named], named] ** 2))) if named.size else float("nan")
         return out, LabelQuality(int(named.size), P, margin, resid, "tracking", over)
-
-    def _rigid_cost(self, X: np.ndarray, pred: np.ndarray) -> np.ndarray:
-        """(R, 8) m: how far each point X (R, 3) as each marker is from a rigid distance to its
-        partner's prediction pred (8, 3): a shoulder a shoulder width from the other, a knee a
-        shin from its ankle and back (0 where the partner is not predicted, and everywhere
-        before the subject's lengths are measured: a default body would mislead)."""
-        body = self._body
-        out = np.zeros((len(X), N_MARKERS))
-        if not body.measured:
-            return out
-        for m, n, length in ((LS, RS, body.shoulder_width), (RS, LS, body.shoulder_width), (LK, LA, body.shin),
-                             (LA, LK, body.shin), (RK, RA, body.shin), (RA, RK, body.shin)):
-            if np.isfinite(pred[n]).all():
-                out[:, m] = np.abs(np.linalg.norm(X - pred[n], axis=1) - length)
-        return out
 
     def _recover(self, pts: Points3D, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
                  row_pt: np.ndarray) -> None:
