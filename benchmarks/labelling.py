@@ -12,9 +12,10 @@ clips the labelling was developed on ("tuned") and clips never looked at while d
 Per take: share of frames with every visible marker named right, frames with a wrong name,
 share of confident frames (a pose from >= 4 named markers) with a joint > 20 cm off (in
 brackets: the same share when the solver is fed the true markers, i.e. what the solver alone
-gets wrong) and with a marker-carrying joint > 20 cm off (what wrong names cause), re-acquisition time after the blackout, the
-longest pose output into the blackout, and MPJPE next to the same take reconstructed live from
-the true markers (same database and solver, same blackout).
+gets wrong) and with a marker-carrying joint > 20 cm off (what wrong names cause),
+re-acquisition time after the blackout, the longest pose output into the blackout, and MPJPE
+next to the same take reconstructed live from the true markers (same database and solver,
+same blackout).
 
     python benchmarks/labelling.py [--data ../shared/data/cmu-bvh] [--cameras 4 2] [--codec mjpg]
 """

@@ -12,7 +12,10 @@ Per frame (:func:`reconstruct_points`):
    views (views off by more than the triangulator's ``max_error_px`` are dropped when >= 3);
 4. the candidates are accepted greedily, best first (more views, fewer *unexplained* views,
    smaller error): a blob is used at most once, a merged blob twice, and two accepted points
-   are never closer than ``min_separation_m``.
+   are never closer than ``min_separation_m``;
+5. a point seen only in merged blobs that each hold one other point (a marker hidden behind
+   another wherever it is seen) lies at the two markers' midpoint: it is reflected through the
+   other point (:meth:`PointReconstructor._mirror`).
 
 A view is *unexplained* for a point when the point projects inside that camera's image and
 no blob is there (a merged blob near it explains it): the marker is hidden (the body, the edge
