@@ -27,7 +27,7 @@ import numpy as np
 
 from .rigid import LA, LK, LS, LW, RA, RK, RS, RW, Body
 
-__all__ = ["Hint", "Hypothesis", "identify", "score_labels"]
+__all__ = ["Hint", "Hypothesis", "identify", "right_of", "score_labels"]
 
 _UP = np.array([0.0, 0.0, 1.0])
 #: a right knee (ankle) less than _LATERAL_M m to the subject's right of the left one costs
@@ -72,6 +72,11 @@ class Hypothesis:
     labels: np.ndarray
     score: float
     facing: np.ndarray
+
+
+def right_of(facing: np.ndarray) -> np.ndarray:
+    """(3,) horizontal unit vector to the subject's right of a (2,) unit facing (right = facing x up)."""
+    return np.array([facing[1], -facing[0], 0.0])
 
 
 def _unit2(v: np.ndarray) -> np.ndarray | None:
@@ -158,7 +163,7 @@ def _legs_score(X: np.ndarray, trust: np.ndarray, L: int, R: int, left: tuple[in
     used = [p for p in (kl, al, kr, ar) if p >= 0]
     if len(set(used)) < len(used):
         return None
-    r = np.array([f[1], -f[0]])  # the subject's right, horizontal
+    r = right_of(f)[:2]
     sc = len(used) - pl - pr - sum(trust[p] for p in used)
     sc -= 2.0 * (_knee_bend(X, X[L], kl, al, f) + _knee_bend(X, X[R], kr, ar, f))
     for a, b in ((kl, kr), (al, ar)):
@@ -176,8 +181,7 @@ def _wrists_score(X: np.ndarray, trust: np.ndarray, L: int, R: int, a: int, b: i
     """Score of wrist points a, b (-1 = unnamed; each within reach of its shoulder)."""
     s = sum(1.0 - trust[w] for w in (a, b) if w >= 0) + hint.agree(LW, a) + hint.agree(RW, b)
     if a >= 0 and b >= 0:
-        r = np.array([f[1], -f[0]])
-        s -= 0.3 * max(0.0, -float((X[b] - X[a])[:2] @ r) - 0.1)
+        s -= 0.3 * max(0.0, -float((X[b] - X[a])[:2] @ right_of(f)[:2]) - 0.1)
     return s
 
 

@@ -36,7 +36,7 @@ from samba_common.skeleton import MARKER_JOINT, N_MARKERS
 
 from ..triangulate import Triangulator
 from .blobs import view_blobs
-from .identify import Hint, identify, score_labels
+from .identify import Hint, identify, right_of, score_labels
 from .points import PointReconstructor, Points3D, PointsConfig
 from .rigid import LA, LK, LS, LW, RA, RK, RS, RW, Body
 
@@ -140,7 +140,6 @@ class Labeller:
         self._t_lost: float | None = None  # first frame with points after the labels were lost
         self._t_ambiguous: float | None = None
         self._shared = np.zeros(N_MARKERS, bool)
-        self._assign = np.full(N_MARKERS, -1, np.int64)
         self._t_audit = -np.inf
         self._free_hist: list[tuple[float, np.ndarray]] = []  # (t, free sure points (F, 3)) over the last second
 
@@ -182,12 +181,12 @@ class Labeller:
         q = LabelQuality(n_points=len(pts))
         out = np.full((N_MARKERS, 3), np.nan)
         if n_pred >= self.config.min_tracked and len(pts):
-            out, q = self._track(pts, pred, gate, t)
+            out, q, assign = self._track(pts, pred, gate, t)
             explained = q.n_labelled >= min(len(pts), N_MARKERS) - 2 or q.n_labelled >= 6
             if explained:
                 self._t_good = t
             if t - self._t_good <= self.config.lost_after:
-                audited = self._audit(pts, out, q, t)
+                audited = self._audit(pts, out, assign, q, t)
                 if audited is not None:
                     out, q = audited
                     # an audit that only adds names keeps the tracks; one that renames restarts them
@@ -233,7 +232,10 @@ class Labeller:
             return m1
         return m1 + (m1 - m0) * min(t - t1, 0.1) / (t1 - t0)
 
-    def _track(self, pts: Points3D, pred: np.ndarray, gate: np.ndarray, t: float) -> tuple[np.ndarray, LabelQuality]:
+    def _track(self, pts: Points3D, pred: np.ndarray, gate: np.ndarray,
+               t: float) -> tuple[np.ndarray, LabelQuality, np.ndarray]:
+        """Name the points after the predictions pred (8, 3) within gate (8,) m: (8, 3) markers,
+        quality, and (8,) the point per marker (-1 = unnamed)."""
         cfg = self.config
         P = len(pts)
         # a point seen only in merged blobs may stand for two markers: it gets a second row
@@ -278,7 +280,7 @@ class Labeller:
         out[assign >= 0] = pts.X[assign[assign >= 0]]
         right = None
         if self._facing is not None and t - self._t_facing <= 0.5:
-            right = _right(self._facing)
+            right = right_of(self._facing)
         if right is not None:
             # legs do not cross: a right knee (ankle) well to the left of the left one is a swap,
             # unless swapping it makes the shins fit worse (feet staggered in a stance turned
@@ -290,12 +292,11 @@ class Labeller:
                 swapped = out.copy()
                 for lm, rm in crossed:
                     swapped[[lm, rm]] = out[[rm, lm]]
-                if _shin_misfit(self._body, swapped) <= _shin_misfit(self._body, out) + 0.02:
+                if self._body.shin_misfit(swapped) <= self._body.shin_misfit(out) + 0.02:
                     for lm, rm in crossed:
                         assign[[lm, rm]], arow[[lm, rm]], out[[lm, rm]] = assign[[rm, lm]], arow[[rm, lm]], out[[rm, lm]]
         _split_shared(out, assign, pred, cfg.merged_half_m, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
-        self._assign = assign
         # rigid distances and facing: drop the worse-predicted marker of a violating group
         for group in self._body.violations(out):
             worst = max(group, key=lambda m: d[arow[m], m])
@@ -325,7 +326,7 @@ class Labeller:
         over = int(sum(1 for m in named if pts.votes[assign[m]].sum() > pts.votes[assign[m], m]))
         self.stats.overridden += over
         resid = float(np.sqrt(np.mean(d_eff[arow[named], named] ** 2))) if named.size else float("nan")
-        return out, LabelQuality(int(named.size), P, margin, resid, "tracking", over)
+        return out, LabelQuality(int(named.size), P, margin, resid, "tracking", over), assign
 
     def _recover(self, pts: Points3D, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
                  row_pt: np.ndarray) -> None:
@@ -354,7 +355,7 @@ class Labeller:
         # rigid lengths only, at a higher cost
         doubt = np.where((pts.n_views[free] < 3) & (pts.unexplained[free] > 0), cfg.unexplained_m, 0.0)
         cost = np.full((len(free), len(lost)), np.inf)
-        right = None if self._facing is None else _right(self._facing)
+        right = None if self._facing is None else right_of(self._facing)
         for j, m in enumerate(lost):
             if np.isfinite(pred[m]).all():
                 d = np.linalg.norm(X - pred[m], axis=1)
@@ -426,7 +427,7 @@ class Labeller:
         """(M,) identification penalty per point: 0 from >= 3 views, else for the views that missed it."""
         return np.where(pts.n_views >= 3, 0.0, np.minimum(0.9 * pts.unexplained, 2.0))
 
-    def _audit(self, pts: Points3D, tracked_out: np.ndarray, q: LabelQuality,
+    def _audit(self, pts: Points3D, tracked_out: np.ndarray, assign: np.ndarray, q: LabelQuality,
                t: float) -> tuple[np.ndarray, LabelQuality] | None:
         """Check the tracked names of this frame against a fresh identification, every
         ``audit_interval`` s while a point that is surely a marker (>= 3 views, or no view
@@ -437,9 +438,9 @@ class Labeller:
         (``min_margin`` over every rival) and scores ``audit_margin`` more than they do
         (``audit_extend_margin`` when it only adds names: a wrist whose track and skeleton lost
         it), or names >= 2 more markers where the tracked names lack a shoulder.
-        tracked_out: (8, 3) the tracked names. Returns (8, 3) markers and quality, or None."""
+        tracked_out: (8, 3) the tracked names; assign: (8,) their points (-1 = unnamed). Returns
+        (8, 3) markers and quality, or None."""
         cfg = self.config
-        assign = self._assign
         free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
         free = free[(pts.n_views[free] >= 3) | (pts.unexplained[free] == 0)]
         self._free_hist = [h for h in self._free_hist if t - h[0] <= 1.0] + [(t, pts.X[free])]
@@ -501,7 +502,7 @@ class Labeller:
         out = np.full((N_MARKERS, 3), np.nan)
         named = labels >= 0
         out[named] = pts.X[labels[named]]
-        _split_shared(out, labels, np.zeros((N_MARKERS, 3)), self.config.merged_half_m, _right(facing))
+        _split_shared(out, labels, np.zeros((N_MARKERS, 3)), self.config.merged_half_m, right_of(facing))
         return out
 
     def _identify(self, pts: Points3D, t: float) -> tuple[np.ndarray, LabelQuality] | None:
@@ -618,23 +619,11 @@ def _margin(labels: np.ndarray, score: float, rivals: list) -> float:
     return score - max(scores) if scores else score
 
 
-def _shin_misfit(body: Body, markers: np.ndarray) -> float:
-    """Sum over the legs with knee and ankle named in markers (8, 3) (NaN = unnamed) of how
-    far (m) their distance is from the shin."""
-    named = np.isfinite(markers).all(axis=1)
-    return sum(body.shin_error(markers[k], markers[a]) for k, a in ((LK, LA), (RK, RA)) if named[k] and named[a])
-
-
 def _two_in_one(pts: Points3D, p: int) -> bool:
     """Point p may hold two markers: its blobs are double-sized everywhere, or merged in all
     its views but at most one."""
     return bool(pts.merged_all[p]) or (not pts.mirrored[p] and pts.n_merged[p] >= 2
                                        and pts.n_merged[p] >= pts.n_views[p] - 1)
-
-
-def _right(facing: np.ndarray) -> np.ndarray:
-    """(3,) horizontal unit vector to the subject's right of a (2,) unit facing (right = facing x up)."""
-    return np.array([facing[1], -facing[0], 0.0])
 
 
 def _facing(left: np.ndarray, right: np.ndarray) -> np.ndarray | None:

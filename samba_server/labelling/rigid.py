@@ -58,6 +58,12 @@ class Body:
     def width_error(self, left: np.ndarray, right: np.ndarray) -> float:
         return abs(float(np.linalg.norm(left - right)) - self.shoulder_width)
 
+    def shin_misfit(self, markers: np.ndarray) -> float:
+        """Sum over the legs with knee and ankle named in markers (8, 3) (NaN = unnamed) of how
+        far (m) their distance is from the shin."""
+        seen = np.isfinite(markers).all(axis=1)
+        return sum(self.shin_error(markers[k], markers[a]) for _s, _w, k, a in SIDES if seen[k] and seen[a])
+
     def violations(self, markers: np.ndarray) -> list[tuple[int, ...]]:
         """Groups of labelled markers (8, 3) (NaN = unlabelled) that break a rigid distance."""
         seen = np.isfinite(markers).all(axis=1)
