@@ -147,10 +147,11 @@ def estimate_start(markers: np.ndarray, db_lengths: np.ndarray, offsets: np.ndar
     hip width and the lateral knee and ankle departures, m (None without an upright standard pose).
     Raises ProportionError when shoulders, shins or arms are never seen.
     """
-    offsets_out = None if offsets is None or not np.any(offsets) else np.array(offsets, dtype=float)
+    skin = offsets is not None and bool(np.any(offsets))
+    offsets_out = np.array(offsets, dtype=float) if skin else None
     leg_prior: tuple[np.ndarray, np.ndarray] | None = None
     db = np.asarray(db_lengths, dtype=float)
-    if offsets is not None and np.any(offsets):
+    if skin:
         markers = approximate_centres(markers, offsets)
     sw = _robust(_dist(markers, "left_shoulder", "right_shoulder"))
     shin = _robust(np.concatenate([_dist(markers, "left_knee", "left_ankle"), _dist(markers, "right_knee", "right_ankle")]))
@@ -166,7 +167,6 @@ def estimate_start(markers: np.ndarray, db_lengths: np.ndarray, offsets: np.ndar
         unit = " (the markers look like millimetres: files are in metres, FORMATS.md)" if 150 <= shin <= 1000 else ""
         raise ProportionError(f"implausible body: knee-ankle distance {shin:.3g} m{unit}")
     stand = standard_pose_frames(markers, arm)
-    skin = offsets is not None and np.any(offsets)
     if skin and stand.sum() >= 5:
         # skin landmarks: approximate_centres is exact only in the standard pose; a hanging arm's
         # dorsal wrist offset points outwards, not up, and the percentile arm came out ~1-2 cm long
@@ -188,24 +188,21 @@ def estimate_start(markers: np.ndarray, db_lengths: np.ndarray, offsets: np.ndar
     out[L["thigh"]] = vertical * db[L["thigh"]] / db_leg
     out[L["hip_width"]] = db[L["hip_width"]] * scale
     if stand.sum() >= 5:
-        # legs straight below the hips: extrapolate the knee spacing past the ankle spacing
+        # legs straight below the hips: extrapolate the knee spacing past the ankle spacing;
+        # skin landmarks with the legs about vertical: the Gaussian fit (with the legs apart,
+        # knee and ankle spacing differing by more than LEGS_APART, the tilt dominates and the
+        # extrapolation is right)
         knee_sep = _dist(markers[stand], "left_knee", "right_knee")
         ankle_sep = _dist(markers[stand], "left_ankle", "right_ankle")
-        if skin:
-            # the fit assumes legs about vertical; with the legs apart (knee and ankle spacing
-            # differing by more than LEGS_APART) the tilt dominates and the extrapolation is right
-            upright = np.abs(ankle_sep - knee_sep) < LEGS_APART
-            hip_sep = float("nan")
-            if upright.sum() >= 5:
-                mean, cov = skin_leg_fit(_robust(knee_sep[upright]), _robust(ankle_sep[upright]),
-                                         out[L["hip_width"]], out[L["thigh"]], out[L["shin"]])
-                hip_sep = float(mean[0])
-                if np.isfinite(hip_sep) and offsets_out is not None:
-                    offsets_out[[M["left_knee"], M["right_knee"]], 0] += mean[1]
-                    offsets_out[[M["left_ankle"], M["right_ankle"]], 0] += mean[2]
-                    leg_prior = (mean, cov)
-            else:
-                hip_sep = _robust(knee_sep - (ankle_sep - knee_sep) * out[L["thigh"]] / out[L["shin"]])
+        upright = np.abs(ankle_sep - knee_sep) < LEGS_APART
+        if skin and upright.sum() >= 5:
+            mean, cov = skin_leg_fit(_robust(knee_sep[upright]), _robust(ankle_sep[upright]),
+                                     out[L["hip_width"]], out[L["thigh"]], out[L["shin"]])
+            hip_sep = float(mean[0])
+            if np.isfinite(hip_sep):
+                offsets_out[[M["left_knee"], M["right_knee"]], 0] += mean[1]
+                offsets_out[[M["left_ankle"], M["right_ankle"]], 0] += mean[2]
+                leg_prior = (mean, cov)
         else:
             hip_sep = _robust(knee_sep - (ankle_sep - knee_sep) * out[L["thigh"]] / out[L["shin"]])
         if np.isfinite(hip_sep):

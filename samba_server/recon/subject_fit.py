@@ -31,7 +31,7 @@ from samba_common.skeleton import BONE_TYPES, MARKER_NAMES, N_MARKERS
 from samba_common.subject import Subject
 
 from .db import MotionDB, load_default_db
-from .proportions import ProportionError, estimate_lengths, estimate_start, standard_pose_frames  # noqa: F401 (tests patch it)
+from .proportions import ProportionError, estimate_lengths, estimate_start
 from .reconstruct import Reconstructor, ReconstructConfig
 from .subject_model import LENGTH_SIGMA, decorrelation, linear_update, placement_from_standard_pose
 
