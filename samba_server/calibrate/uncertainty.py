@@ -94,17 +94,26 @@ def _so3_log(R: np.ndarray) -> np.ndarray:
     return 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
 
 
-def _rigid_basis(centres: np.ndarray) -> np.ndarray:
-    """Orthonormal basis (3 C, 6) of the centre perturbations a rigid motion causes."""
+def _rigid_motions(centres: np.ndarray) -> np.ndarray:
+    """(3 C, 6) centre perturbations of a rigid motion of the rig with centres (C, 3): unit
+    translations along x, y, z (columns 0-2), then small rotations about x, y, z through the
+    centres' mean (columns 3-5, per radian)."""
     d = centres - centres.mean(axis=0)
-    cols = []
+    B = np.zeros((3 * len(centres), 6))
     for k in range(3):
         e = np.zeros(3)
         e[k] = 1.0
-        cols.append(np.tile(e, len(centres)))
-        cols.append(np.cross(e, d).ravel())
-    Q, _ = np.linalg.qr(np.stack(cols, axis=1))
-    return Q
+        B[:, k] = np.tile(e, len(centres))
+        B[:, 3 + k] = np.cross(e, d).ravel()
+    return B
+
+
+def _radius_95(S: np.ndarray, z: np.ndarray) -> float:
+    """95 % quantile of the norm of a zero-mean Gaussian with covariance S (3, 3), from the
+    standard normal samples z (N, 3)."""
+    w, v = np.linalg.eigh(0.5 * (S + S.T))
+    e = (z * np.sqrt(np.clip(w, 0, None))) @ v.T
+    return float(np.quantile(np.linalg.norm(e, axis=1), 0.95))
 
 
 def rig_uncertainty(res: BundleResult, seed: int = 0) -> RigUncertainty:
@@ -124,7 +133,7 @@ def rig_uncertainty(res: BundleResult, seed: int = 0) -> RigUncertainty:
             xm[k] -= eps
             G[3 * c:3 * c + 3, 6 * slot + k] = (_centre(xp[:3], xp[3:]) - _centre(xm[:3], xm[3:])) / (2 * eps)
     Sc = G @ cov @ G.T
-    Q = _rigid_basis(centres)
+    Q, _ = np.linalg.qr(_rigid_motions(centres))  # orthonormal basis of the rigid motions
     Pn = np.eye(3 * C) - Q @ Q.T
     Sa = Pn @ Sc @ Pn.T
     rng = np.random.default_rng(seed)
@@ -132,9 +141,7 @@ def rig_uncertainty(res: BundleResult, seed: int = 0) -> RigUncertainty:
     r95, rms = np.zeros(C), np.zeros(C)
     for c in range(C):
         S3 = Sa[3 * c:3 * c + 3, 3 * c:3 * c + 3]
-        w, v = np.linalg.eigh(0.5 * (S3 + S3.T))
-        e = (z * np.sqrt(np.clip(w, 0, None))) @ v.T
-        r95[c] = float(np.quantile(np.linalg.norm(e, axis=1), 0.95))
+        r95[c] = _radius_95(S3, z)
         rms[c] = float(np.sqrt(max(np.trace(S3), 0.0)))
     rot95 = _rotation_95(res, cov, G, centres, z)
     d = centres - centres.mean(axis=0)
@@ -157,14 +164,7 @@ def _rotation_95(res: BundleResult, cov: np.ndarray, G: np.ndarray, centres: np.
     cov: (n, n) camera covariance; G: (3 C, n) centre Jacobian; z: (S, 3) standard normals."""
     cams: list[Camera] = res.cameras
     C = len(cams)
-    d = centres - centres.mean(axis=0)
-    B = np.zeros((3 * C, 6))  # rigid motion: translation (3), rotation (3) of the centres
-    for k in range(3):
-        e = np.zeros(3)
-        e[k] = 1.0
-        B[:, k] = np.tile(e, C)
-        B[:, 3 + k] = np.cross(e, d).ravel()
-    Lrot = np.linalg.pinv(B)[3:]  # (3, 3 C): alignment rotation from centre changes
+    Lrot = np.linalg.pinv(_rigid_motions(centres))[3:]  # (3, 3 C): alignment rotation from centre changes
     Omega = Lrot @ G  # (3, n) world-frame rotation of the alignment per parameter
     out = np.zeros(C)
     eps = 1e-7
@@ -181,10 +181,7 @@ def _rotation_95(res: BundleResult, cov: np.ndarray, G: np.ndarray, centres: np.
                 rm[k] -= eps
                 dR = (_so3_log(_rotmat(rp) @ R0.T) - _so3_log(_rotmat(rm) @ R0.T)) / (2 * eps)
                 H[:, 6 * slot + k] += dR
-        S3 = H @ cov @ H.T
-        w, v = np.linalg.eigh(0.5 * (S3 + S3.T))
-        e = (z * np.sqrt(np.clip(w, 0, None))) @ v.T
-        out[c] = float(np.degrees(np.quantile(np.linalg.norm(e, axis=1), 0.95)))
+        out[c] = float(np.degrees(_radius_95(H @ cov @ H.T, z)))
     return out
 
 
