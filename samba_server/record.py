@@ -630,20 +630,32 @@ def recorded_subjects(path: str | Path) -> list[tuple[int, str]]:
     return out
 
 
+def _subject_or_none(toml: str, where: str):
+    """subject.toml text as a samba_common.subject.Subject, or None (logged) when invalid."""
+    from samba_common.subject import SubjectError, load_subject_text
+
+    try:
+        return load_subject_text(toml, where)
+    except SubjectError as exc:
+        log.warning("%s", exc)
+        return None
+
+
 def take_subject(path: str | Path):
     """The subject a take was recorded with when the server was given one (``--subject``:
     ``subject_toml`` in the ``samba`` metadata record), as a samba_common.subject.Subject, or
     None (then a replayed solver measures it live again, as the server did)."""
-    from samba_common.subject import SubjectError, load_subject_text
-
     reader = TakeReader(path, topics=[CALIBRATION_TOPIC])
     for _m in reader:
         break  # the metadata record is written before the first message
     toml = reader.metadata.get("samba", {}).get("subject_toml")
-    if not toml:
-        return None
-    try:
-        return load_subject_text(toml, f"{path} (its recorded subject)")
-    except SubjectError as exc:
-        log.warning("%s", exc)
-        return None
+    return _subject_or_none(toml, f"{path} (its recorded subject)") if toml else None
+
+
+def last_subject(path: str | Path):
+    """The last subject a take's poses were solved with (the last subject event when it was
+    measured live, else :func:`take_subject`), or None."""
+    events = recorded_subjects(path)
+    if not events:
+        return take_subject(path)
+    return _subject_or_none(events[-1][1], f"{path} (recorded subject)")

@@ -16,7 +16,7 @@ import numpy as np
 
 from samba_common.formats import load_joints, load_markers
 from samba_common.skeleton import JOINT_NAMES, MARKER_NAMES
-from samba_common.subject import Subject, SubjectError, load_subject_text, subject_from_metadata
+from samba_common.subject import Subject, subject_from_metadata
 
 log = logging.getLogger(__name__)
 
@@ -114,7 +114,10 @@ def read_mcap_poses(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, np
 
 
 def _load_mcap(p: Path) -> ExportTake:
-    """Joints and markers from a Samba recording; t in seconds from the first pose."""
+    """Joints and markers from a Samba recording (and the last subject it was solved with); t in
+    seconds from the first pose."""
+    from samba_server import record
+
     try:
         joints, t_ns, markers, _ = read_mcap_poses(p)
     except (ValueError, OSError) as exc:
@@ -123,22 +126,7 @@ def _load_mcap(p: Path) -> ExportTake:
         raise TakeError(f"{p}: the recording holds no poses (was the server solving?)")
     order = np.argsort(t_ns, kind="stable")
     t = (t_ns[order] - t_ns[order[0]]) / 1e9
-    return ExportTake(joints[order], t, markers[order], str(p), _mcap_subject(p))
-
-
-def _mcap_subject(p: Path) -> Subject | None:
-    """The last subject recorded in a take (an event when measured live, else the ``--subject``
-    of the ``samba`` metadata record), or None."""
-    from samba_server import record
-
-    events = record.recorded_subjects(p)
-    if not events:
-        return record.take_subject(p)
-    try:
-        return load_subject_text(events[-1][1], f"{p} (recorded subject)")
-    except SubjectError as exc:
-        log.warning("%s", exc)
-        return None
+    return ExportTake(joints[order], t, markers[order], str(p), record.last_subject(p))
 
 
 def fill_invalid(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
