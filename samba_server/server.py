@@ -93,7 +93,9 @@ class Server:
         self.config = config or ServerConfig()
         self.sync = FrameSync(sync_config)
         self.triangulator = Triangulator(rig, tri_config)
-        self.labeller = Labeller(rig, self.triangulator, label_config)
+        db = getattr(reconstructor, "db", None)
+        self.labeller = Labeller(rig, self.triangulator, label_config,
+                                 prior_lengths=None if db is None else db.mean_lengths)
         self.reconstructor = reconstructor
         self.recorder = recorder
         self.publish = publish

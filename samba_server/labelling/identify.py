@@ -20,6 +20,7 @@ The best labelling wins; its margin over the runner-up tells how sure the naming
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from itertools import combinations
 
@@ -33,12 +34,16 @@ _UP = np.array([0.0, 0.0, 1.0])
 #: a right knee (ankle) less than _LATERAL_M m to the subject's right of the left one costs
 #: _LATERAL_W per metre: legs cross little, so a swapped pair costs about 1
 _LATERAL_W, _LATERAL_M = 4.0, 0.03
+#: knees and ankles in opposite lateral orders (each pair more than _LATERAL_M apart) cost _CROSS_W
+_CROSS_W = 0.4
 #: shoulders more than _TILT_M m apart in height cost _TILT_W per metre (a wrist at shoulder
 #: height a shoulder width away is not a shoulder)
 _TILT_W, _TILT_M = 10.0, 0.06
 #: an ankle named without its knee more than _HIGH_ANKLE_M m above the floor costs
 #: _HIGH_ANKLE_W per metre
 _HIGH_ANKLE_W, _HIGH_ANKLE_M = 2.0, 0.25
+#: score of the second marker a shared point names (a separate point naming it scores 1)
+_SHARED_NAME = 0.4
 #: a knee nearer its shoulder than _NEAR_F trunks costs _NEAR_W per metre (at most 2)
 _NEAR_W, _NEAR_F = 8.0, 0.75
 
@@ -48,12 +53,15 @@ class Hint:
     """What is known about the subject besides the points.
 
     facing: (2,) unit horizontal facing direction, or None; facing_weight: how much it counts;
-    velocity: (3,) m/s of the body's centre over the last frames, or None; labels: (8,) point
-    per marker that tracking named (-1 = none), each agreeing name adding labels_weight.
+    facing_slack: radians the subject may have turned since (a facing within it of the known
+    one costs nothing); velocity: (3,) m/s of the body's centre over the last frames, or None;
+    labels: (8,) point per marker that tracking named (-1 = none), each agreeing name adding
+    labels_weight.
     """
 
     facing: np.ndarray | None = None
     facing_weight: float = 0.0
+    facing_slack: float = 0.0
     velocity: np.ndarray | None = None
     labels: np.ndarray | None = None
     labels_weight: float = 0.0
@@ -146,7 +154,8 @@ def _shoulders(X: np.ndarray, L: int, R: int, trust: np.ndarray, body: Body, hin
     base -= _TILT_W * max(0.0, abs(float(X[L, 2] - X[R, 2])) - _TILT_M)  # shoulders stay level
     base += hint.agree(LS, L) + hint.agree(RS, R)
     if hint.facing is not None:
-        base -= hint.facing_weight * (1.0 - float(f @ hint.facing))
+        turn = math.acos(max(-1.0, min(1.0, float(f @ hint.facing))))
+        base -= hint.facing_weight * (1.0 - math.cos(max(0.0, turn - hint.facing_slack)))
     if hint.velocity is not None and np.hypot(*hint.velocity[:2]) > 0.5:
         v = hint.velocity[:2] / np.hypot(*hint.velocity[:2])
         base -= 1.5 * max(0.0, -float(f @ v) - 0.2)
@@ -166,12 +175,18 @@ def _legs_score(X: np.ndarray, trust: np.ndarray, L: int, R: int, left: tuple[in
     r = right_of(f)[:2]
     sc = len(used) - pl - pr - sum(trust[p] for p in used)
     sc -= 2.0 * (_knee_bend(X, X[L], kl, al, f) + _knee_bend(X, X[R], kr, ar, f))
+    side = []
     for a, b in ((kl, kr), (al, ar)):
         if a >= 0 and b >= 0:
-            sc -= _LATERAL_W * max(0.0, _LATERAL_M - float((X[b] - X[a])[:2] @ r))
+            side.append(float((X[b] - X[a])[:2] @ r))
+            sc -= _LATERAL_W * max(0.0, _LATERAL_M - side[-1])
+    if len(side) == 2 and side[0] * side[1] < 0 and min(abs(side[0]), abs(side[1])) > _LATERAL_M:
+        sc -= _CROSS_W  # the knees in one order, the ankles in the other: the legs cross
     kl, kr = _share(kl, kr, shared)
     al, ar = _share(al, ar, shared)
-    sc += int(kl == kr >= 0) + int(al == ar >= 0)  # a shared point names two markers (int: numpy bools add as "or")
+    # a shared point names two markers, a little less surely than two points do (int: numpy
+    # bools add as "or")
+    sc += _SHARED_NAME * (int(kl == kr >= 0) + int(al == ar >= 0))
     sc += hint.agree(LK, kl) + hint.agree(LA, al) + hint.agree(RK, kr) + hint.agree(RA, ar)
     return sc, kl, al, kr, ar
 

@@ -75,7 +75,8 @@ class LabelConfig:
     audit_agree: float = 0.3  #: score, per marker, of agreeing with a tracked name in that identification
     audit_extend_margin: float = 0.5  #: an identification that only adds names to the tracked ones needs this much more
     facing_weight: float = 3.0  #: weight of the known facing when identifying ...
-    facing_decay: float = 1.0  #: ... decaying with this time constant since it was known
+    facing_decay: float = 1.0  #: ... decaying with this time constant since it was known ...
+    facing_turn_rate: float = 1.5  #: ... and free within this many rad/s since then (at most 90 degrees)
     first_facing_weight: float = 1.0  #: before any labelling: the standard pose faces +Y
     rigid_abs_tol: float = 0.05  #: rigid distances may differ by this ...
     rigid_rel_tol: float = 0.03  #: ... plus this fraction of half the body height
@@ -120,14 +121,18 @@ class LabelStats:
 
 class Labeller:
     """See the module docstring. rig: the calibration; triangulator: the server's (shares its
-    undistortion tables)."""
+    undistortion tables); prior_lengths: (8,) bone lengths (BONE_TYPES order, m) expected
+    before the subject is measured, e.g. the motion database's mean body (None: an average
+    adult)."""
 
-    def __init__(self, rig: CameraRig, triangulator: Triangulator | None = None, config: LabelConfig | None = None):
+    def __init__(self, rig: CameraRig, triangulator: Triangulator | None = None, config: LabelConfig | None = None,
+                 prior_lengths: np.ndarray | None = None):
         self.rig = rig
         self.config = config or LabelConfig()
         self.points = PointReconstructor(rig, triangulator or Triangulator(rig), self.config.points)
         self.stats = LabelStats()
-        self._body = Body.from_lengths(None, self.config.rigid_abs_tol, self.config.rigid_rel_tol)
+        self._body = Body.from_lengths(prior_lengths, self.config.rigid_abs_tol, self.config.rigid_rel_tol,
+                                       measured=False)
         self._lengths_key: bytes | None = None
         self._pos = np.full((N_MARKERS, 3), np.nan)
         self._vel = np.zeros((N_MARKERS, 3))
@@ -415,6 +420,7 @@ class Labeller:
         if self._facing is not None:
             hint.facing = self._facing
             hint.facing_weight = cfg.facing_weight * math.exp(-(t - self._t_facing) / cfg.facing_decay)
+            hint.facing_slack = min(math.pi / 2, cfg.facing_turn_rate * (t - self._t_facing))
         elif self.stats.identifications == 0:
             hint.facing, hint.facing_weight = np.array([0.0, 1.0]), cfg.first_facing_weight
         if len(self._centres) >= 2 and self._centres[-1][0] - self._centres[0][0] >= 0.2:

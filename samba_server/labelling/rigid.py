@@ -2,8 +2,8 @@
 
 Markers sit on joints (docs/formats.md), so the knee-ankle marker distance is the shin, the
 shoulder-shoulder distance the shoulder width, and a wrist is never farther from its shoulder
-than the arm (upper arm + forearm). Before the subject is measured the database's mean body
-stands in, with wider tolerances.
+than the arm (upper arm + forearm). Before the subject is measured the motion database's mean
+body (else an average adult) stands in, with wider tolerances.
 """
 
 from __future__ import annotations
@@ -40,10 +40,13 @@ class Body:
     measured: bool
 
     @staticmethod
-    def from_lengths(lengths: np.ndarray | None, abs_tol: float = 0.05, rel_tol: float = 0.03) -> "Body":
-        """Body from (8,) bone lengths in BONE_TYPES order, or the default body when None."""
-        measured = lengths is not None
-        ln = np.asarray(lengths if measured else DEFAULT_LENGTHS, float)
+    def from_lengths(lengths: np.ndarray | None, abs_tol: float = 0.05, rel_tol: float = 0.03,
+                     measured: bool = True) -> "Body":
+        """Body from (8,) bone lengths in BONE_TYPES order, or the default body when None.
+        measured=False: the lengths are a prior (e.g. the motion database's mean body), with
+        the default body's wide tolerances."""
+        measured = measured and lengths is not None
+        ln = np.asarray(DEFAULT_LENGTHS if lengths is None else lengths, float)
         scale = ln[_B["shin"]] + ln[_B["thigh"]] + ln[_B["torso"]]
         tol = abs_tol + (rel_tol if measured else 0.15) * 0.5 * scale
         return Body(shin=float(ln[_B["shin"]]), shoulder_width=float(ln[_B["shoulder_width"]]),
