@@ -379,6 +379,13 @@ class Labeller:
                     e = np.abs(np.linalg.norm(X - named[ankle], axis=1) - body.shin)
                     anchor = np.where((e <= body.tol) & (X[:, 2] > named[ankle][2]), e, np.inf)
             cost[:, j] = np.minimum(cost[:, j], cfg.anchor_m + anchor + doubt)
+            for r in np.flatnonzero(np.isfinite(cost[:, j])):
+                # a candidate that breaks a rigid distance to the named markers is none (left
+                # in, it won the assignment and, rejected after it, kept a better pair out)
+                trial = named.copy()
+                trial[m] = X[r]
+                if any(m in g for g in body.violations(trial)):
+                    cost[r, j] = np.inf
         if not np.isfinite(cost).any():
             return
         # (points + markers) x (markers + points): a point may stay free at no cost, a marker
