@@ -59,6 +59,7 @@ class LabelConfig:
     merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
+    wrist_side_w: float = 0.5  #: m of cost per m a wrist unseen last frame is nearer the other shoulder than its own
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
     max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast ...
     turn_slack_deg: float = 45.0  #: ... plus this much (noise of the shoulder points) between labellings
@@ -253,6 +254,14 @@ class Labeller:
         ghostly = np.where(pts.n_views[row_pt] < 3, np.minimum(pts.unexplained[row_pt], 2), 0)
         cost = d_eff - cfg.hint_m * pts.votes[row_pt] + cfg.merged_m * pts.merged[row_pt, None] \
             + cfg.unexplained_m * ghostly[:, None]
+        if np.isfinite(pred[[LS, RS]]).all():
+            # a wrist unseen last frame (its prediction stale) costs for being nearer the other
+            # shoulder than its own: arms cross little, and two hands on one sword hilt part
+            # with one stale prediction between them
+            dl, dr = (np.linalg.norm(X - pred[s], axis=1) for s in (LS, RS))
+            for w, extra in ((LW, dl - dr), (RW, dr - dl)):
+                if gate[w] > cfg.gate_m + 1e-6:
+                    cost[:, w] += cfg.wrist_side_w * np.maximum(0.0, extra)
         ok = np.isfinite(d) & (d_eff <= gate[None, :])
         big = 1e3
         full = np.full((Pr, N_MARKERS + Pr), big)
