@@ -147,6 +147,7 @@ class Labeller:
         self._t_ambiguous: float | None = None
         self._shared = np.zeros(N_MARKERS, bool)
         self._t_audit = -np.inf
+        self._t_frame = self._t_prev = -np.inf  # this frame's and the previous frame's times
         self._free_hist: list[tuple[float, np.ndarray]] = []  # (t, free sure points (F, 3)) over the last second
 
     # ------------------------------------------------------------------ feedback from the server
@@ -178,6 +179,7 @@ class Labeller:
         """Name the markers of one frame. packets: per camera (rig order) a MarkerPacket or None;
         t: seconds. Returns ((8, 3) world metres, NaN = not named; quality)."""
         self.stats.frames += 1
+        self._t_prev, self._t_frame = self._t_frame, t
         pts = self.points.reconstruct([view_blobs(p) for p in packets])
         if len(pts) >= 2:
             self.stats.frames_with_points += 1
@@ -254,13 +256,14 @@ class Labeller:
         ghostly = np.where(pts.n_views[row_pt] < 3, np.minimum(pts.unexplained[row_pt], 2), 0)
         cost = d_eff - cfg.hint_m * pts.votes[row_pt] + cfg.merged_m * pts.merged[row_pt, None] \
             + cfg.unexplained_m * ghostly[:, None]
+        stale = self._seen < self._t_prev - 1e-6  # (8,) not named last frame
         if np.isfinite(pred[[LS, RS]]).all():
             # a wrist unseen last frame (its prediction stale) costs for being nearer the other
             # shoulder than its own: arms cross little, and two hands on one sword hilt part
             # with one stale prediction between them
             dl, dr = (np.linalg.norm(X - pred[s], axis=1) for s in (LS, RS))
             for w, extra in ((LW, dl - dr), (RW, dr - dl)):
-                if gate[w] > cfg.gate_m + 1e-6:
+                if stale[w]:
                     cost[:, w] += cfg.wrist_side_w * np.maximum(0.0, extra)
         ok = np.isfinite(d) & (d_eff <= gate[None, :])
         big = 1e3
@@ -298,7 +301,9 @@ class Labeller:
         if right is not None:
             # legs do not cross: a right knee (ankle) well to the left of the left one is a swap,
             # unless swapping it makes the shins fit worse (feet staggered in a stance turned
-            # against the shoulders put the right ankle left of the left one, the knees not)
+            # against the shoulders put the right ankle left of the left one, the knees not).
+            # Legs tracked frame to frame may cross (a crossover step): they are swapped only
+            # when that makes the shins fit clearly better
             crossed = [(lm, rm) for lm, rm in ((LK, RK), (LA, RA))
                        if assign[lm] >= 0 and assign[rm] >= 0 and assign[lm] != assign[rm]
                        and float((out[rm] - out[lm]) @ right) < -cfg.crossed_m]
@@ -306,7 +311,8 @@ class Labeller:
                 swapped = out.copy()
                 for lm, rm in crossed:
                     swapped[[lm, rm]] = out[[rm, lm]]
-                if self._body.shin_misfit(swapped) <= self._body.shin_misfit(out) + 0.02:
+                slack = 0.02 if any(stale[m] for pair in crossed for m in pair) else -0.005
+                if self._body.shin_misfit(swapped) <= self._body.shin_misfit(out) + slack:
                     for lm, rm in crossed:
                         assign[[lm, rm]], arow[[lm, rm]], out[[lm, rm]] = assign[[rm, lm]], arow[[rm, lm]], out[[rm, lm]]
         _split_shared(out, assign, pred, cfg.merged_half_m, right)

@@ -371,3 +371,21 @@ def test_knees_seen_in_merged_blobs_are_not_taken_for_crossed_legs():
     assert (hyps[0].labels == np.arange(8)).all()
     swapped = [h.score for h in hyps if h.labels[LK] == RK and h.labels[RK] == LK]
     assert hyps[0].score - max(swapped, default=-np.inf) >= LabelConfig().min_margin
+
+
+def test_a_leg_crossing_over_the_other_keeps_its_names():
+    """A sideways crossover step: the right leg passes in front of the left one and ends
+    20 cm to its left, knee and ankle alike, tracked frame to frame. Swapping the legs back
+    ("legs do not cross") fits the shins exactly as well, so it used to swap them for as long
+    as the legs stayed crossed."""
+    from samba_server.labelling.rigid import RA, RK
+    rig = default_rig(4)
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    n = 90
+    truth = np.repeat(pose[None], n, axis=0)
+    s = np.clip((np.arange(n) - 20) / 40.0, 0.0, 1.0)  # still, 40 frames crossing, still
+    truth[:, [RK, RA], 0] -= (0.4 * s)[:, None]  # to the left ...
+    truth[:, [RK, RA], 1] += (0.25 * np.sin(np.pi * np.minimum(s, 0.5)))[:, None]  # ... passing in front
+    named = _run(Labeller(rig), rig, truth, np.random.default_rng(4))
+    right = _right(named, truth)
+    assert right[10:].all(), np.argwhere(~right[10:])[:5]
