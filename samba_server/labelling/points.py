@@ -15,7 +15,10 @@ Per frame (:func:`reconstruct_points`):
    are never closer than ``min_separation_m``;
 5. a point seen only in merged blobs that each hold one other point (a marker hidden behind
    another wherever it is seen) lies at the two markers' midpoint: it is reflected through the
-   other point (:meth:`PointReconstructor._mirror`).
+   other point (:meth:`PointReconstructor._mirror`);
+6. a point seen in merged blobs in every view but one, where a free blob lies next to its own
+   (two markers that only that view parts, knees passing in a walk), becomes two points on
+   those two blobs' rays (:meth:`PointReconstructor._part`).
 
 A view is *unexplained* for a point when the point projects inside that camera's image and
 no blob is there (a merged blob near it explains it): the marker is hidden (the body, the edge
@@ -53,6 +56,7 @@ class PointsConfig:
     max_range_m: float = 12.0  #: points farther than this from every camera are rejected
     max_points: int = 24  #: at most this many points per frame (best first)
     double_size_ratio: float = 1.5  #: a point whose blobs are this many times a typical point's holds two markers
+    part_px: float = 6.0  #: two single blobs this close in the one view that parts two otherwise merged markers
 
 
 @dataclass
@@ -228,6 +232,9 @@ class PointReconstructor:
         idx = np.array(keep)
         self._unshare(idx, X, err, n_views, blob, uv)
         mirrored = self._mirror(idx, X, err, blob, uv, views)
+        X, err, n_views, blob, uv, missing, idx, parted = self._part(idx, X, err, n_views, blob, uv, missing,
+                                                                     views, xy, cap)
+        mirrored = np.r_[mirrored, np.zeros(len(idx) - len(mirrored), bool)]
         blob = blob[:, idx]
         votes = np.zeros((len(idx), 8), np.int64)
         n_merged = np.zeros(len(idx), np.int64)
@@ -251,7 +258,7 @@ class PointReconstructor:
             ref = ref[np.isfinite(ref)]
             if ref.size:
                 merged_all = med >= cfg.double_size_ratio * percentile(ref, 40.0)
-        merged_all &= ~mirrored
+        merged_all &= ~mirrored & ~parted
         return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing[idx].astype(np.int64), blob,
                         votes, n_merged > 0, merged_all, n_merged, mirrored)
 
@@ -312,6 +319,73 @@ class PointReconstructor:
             X[j], err[j] = res.points[0], res.error[0]
             out[r] = True
         return out
+
+    def _part(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
+              uv: np.ndarray, missing: np.ndarray, views: list[ViewBlobs], xy: list[np.ndarray],
+              cap: list[np.ndarray]) -> tuple[np.ndarray, ...]:
+        """Two markers merged in every view but one (knees passing in a walk) make one accepted
+        point, from the merged blobs and one of the two separate blobs of the last view; the
+        other separate blob stays unused and the point sits between the markers. When an
+        accepted point is seen in merged blobs in >= 2 views and in one view by a single blob
+        with a free single blob within ``part_px``, the two markers are placed on those two
+        blobs' rays, each at its point nearest the merged views' point (the rays are nearly
+        parallel, so their depths come from it), if they end up
+        ``min_separation_m`` apart and both project inside every merged blob. The first
+        replaces the point, the second is appended (candidate arrays grown, its index added
+        to idx). Returns X, err, n_views, blob, uv, missing, idx and (len(idx),) bool, the
+        points placed so."""
+        cfg = self.config
+        parted = np.zeros(len(idx), bool)
+        new: list[tuple[int, np.ndarray, int, int]] = []  # (k, X of the second, view, its blob)
+        for r, k in enumerate(idx):
+            cs = np.flatnonzero(blob[:, k] >= 0)
+            merged = [c for c in cs if views[c].capacity[blob[c, k]] > 1]
+            single = [c for c in cs if views[c].capacity[blob[c, k]] <= 1]
+            if len(merged) < 2 or len(single) != 1:
+                continue
+            c = single[0]
+            v = views[c]
+            d = np.linalg.norm(v.uv - v.uv[blob[c, k]], axis=1)
+            free = np.flatnonzero((d > 0) & (d <= cfg.part_px) & (cap[c] > 0) & (v.capacity <= 1))
+            if len(free) != 1:
+                continue
+            sub = np.full((self.C, 1, 2), np.nan)
+            sub[merged, 0] = uv[merged, k]
+            mid = self.tri.triangulate(sub).points[0]
+            if not np.isfinite(mid).all():
+                continue
+            cam = self.rig.cameras[c]
+            ends = []
+            for b in (blob[c, k], free[0]):
+                ray = cam.R.T @ np.array([xy[c][b, 0], xy[c][b, 1], 1.0])
+                ends.append(cam.center + ray * float((mid - cam.center) @ ray) / float(ray @ ray))
+            a, b2 = ends
+            if np.linalg.norm(a - b2) < cfg.min_separation_m:
+                continue
+            inside = True
+            for m in merged:
+                vm, bm = views[m], blob[m, k]
+                p = self.rig.cameras[m].project(np.stack([a, b2]))
+                inside &= bool((np.linalg.norm(p - vm.uv[bm], axis=1) <= vm.radius[bm] + cfg.support_px).all())
+            if not inside:
+                continue
+            X[k] = a
+            parted[r] = True
+            cap[c][free[0]] -= 1
+            new.append((int(k), b2, int(c), int(free[0])))
+        if not new:
+            return X, err, n_views, blob, uv, missing, idx, parted
+        K = len(X)
+        X = np.vstack([X] + [n[1][None] for n in new])
+        src = [n[0] for n in new]
+        err, n_views, missing = np.r_[err, err[src]], np.r_[n_views, n_views[src]], np.r_[missing, missing[src]]
+        blob = np.hstack([blob, blob[:, src]])
+        uv = np.concatenate([uv, uv[:, src]], axis=1)
+        for j, (_k, _x, c, b) in enumerate(new):
+            blob[c, K + j] = b
+            uv[c, K + j] = views[c].uv[b]
+        idx = np.r_[idx, K + np.arange(len(new))]
+        return X, err, n_views, blob, uv, missing, idx, np.r_[parted, np.ones(len(new), bool)]
 
     def _reduce(self, k: int, drop: list[int], X: np.ndarray, err: np.ndarray, n_views: np.ndarray,
                 blob: np.ndarray, uv: np.ndarray) -> bool:

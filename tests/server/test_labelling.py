@@ -389,3 +389,32 @@ def test_a_leg_crossing_over_the_other_keeps_its_names():
     named = _run(Labeller(rig), rig, truth, np.random.default_rng(4))
     right = _right(named, truth)
     assert right[10:].all(), np.argwhere(~right[10:])[:5]
+
+
+def test_two_markers_merged_in_all_views_but_one_become_two_points():
+    """Knees passing each other in a walk (blobs of a rendered take, traced): one merged blob
+    in three views, two blobs 2.7 px apart in the fourth. The merged blobs and one of the two
+    made a single point 4.6 cm from the left knee and the right knee's blob stayed unused (the
+    right knee was then placed 9 cm off). Now each of the two blobs gives a point on its ray
+    at the merged point's depth."""
+    from samba_server.labelling.blobs import ViewBlobs
+    from samba_server.triangulate import TriangulateConfig
+    rig = default_rig(4)
+    pr = PointReconstructor(rig, Triangulator(rig, TriangulateConfig(max_error_px=1.0)))  # configs/server.toml
+    blobs = [  # per camera: u, v, capacity, radius (px)
+        [[5.04, 36.14, 1, 1.38], [9.09, 101.7, 2, 1.78], [42.39, 47.12, 1, 1.38], [44.99, 37.33, 1, 1.49],
+         [47.73, 66.1, 2, 1.78], [49.62, 58.19, 2, 1.78], [51.59, 37.26, 1, 1.13], [56.34, 45.07, 1, 1.26]],
+        [[10.13, 13.17, 2, 1.69], [109.97, 45.91, 1, 1.26], [112.33, 58.18, 1, 1.26], [113.72, 37.32, 1, 1.13],
+         [115.03, 58.71, 1, 1.26], [116.33, 67.47, 1, 1.13], [120.59, 38.49, 1, 1.13], [122.55, 47.68, 1, 1.13],
+         [151.69, 40.71, 2, 1.49]],
+        [[129.58, 68.74, 1, 2.76], [134.7, 88.73, 2, 2.52], [138.94, 51.28, 1, 2.76], [139.33, 108.13, 1, 2.46],
+         [144.18, 104.24, 1, 2.46], [144.82, 48.81, 1, 2.59], [151.24, 23.35, 1, 1.95], [154.11, 85.18, 1, 1.6]],
+        [[12.8, 50.22, 1, 2.19], [16.32, 99.83, 1, 2.11], [17.39, 51.08, 1, 2.26], [22.42, 68.3, 1, 2.33],
+         [23.04, 83.65, 2, 2.93], [152.85, 65.42, 1, 1.49], [153.83, 22.74, 1, 1.69]],
+    ]
+    views = [ViewBlobs(np.array(b)[:, :2], np.array(b)[:, 2].astype(np.int64), np.array(b)[:, 3],
+                       np.full(len(b), -1, np.int64)) for b in blobs]
+    knees = np.array([[-0.222, -2.131, 0.549], [-0.075, -2.083, 0.563]])  # the take's truth
+    got = pr.reconstruct(views)
+    off = np.linalg.norm(got.X[:, None] - knees[None], axis=2).min(axis=0)
+    assert (off < 0.04).all(), off
