@@ -184,6 +184,9 @@ def _legs_score(X: np.ndarray, trust: np.ndarray, L: int, R: int, left: tuple[in
         sc -= _CROSS_W  # the knees in one order, the ankles in the other: the legs cross
     kl, kr = _share(kl, kr, shared)
     al, ar = _share(al, ar, shared)
+    for k, a in ((kl, al), (kr, ar)):
+        if k >= 0 and a >= 0 and X[a, 2] > X[k, 2] + 0.1:
+            return None  # shared across the sides, a knee point ended up below its ankle's
     # a shared point names two markers, a little less surely than two points do (int: numpy
     # bools add as "or")
     sc += _SHARED_NAME * (int(kl == kr >= 0) + int(al == ar >= 0))

@@ -59,7 +59,7 @@ class LabelConfig:
     merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
-    wrist_side_w: float = 0.5  #: m of cost per m a wrist unseen last frame is nearer the other shoulder than its own
+    wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
     max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast ...
     turn_slack_deg: float = 45.0  #: ... plus this much (noise of the shoulder points) between labellings
@@ -183,7 +183,11 @@ class Labeller:
         pts = self.points.reconstruct([view_blobs(p) for p in packets])
         if len(pts) >= 2:
             self.stats.frames_with_points += 1
-            self._centres = [c for c in self._centres if t - c[0] <= 0.5] + [(t, pts.X.mean(axis=0))]
+            sure = pts.X[pts.n_views >= 3]
+            if len(sure) >= 3:
+                # the body's travel: the median of the points no ghost makes (the mean of all
+                # points jumped as 2-view ghosts came and went: "walking backwards" after a blackout)
+                self._centres = [c for c in self._centres if t - c[0] <= 0.5] + [(t, np.median(sure, axis=0))]
         pred, gate = self._predict(t)
         n_pred = int(np.isfinite(pred).all(axis=1).sum())
         q = LabelQuality(n_points=len(pts))
@@ -258,7 +262,7 @@ class Labeller:
             + cfg.unexplained_m * ghostly[:, None]
         stale = self._seen < self._t_prev - 1e-6  # (8,) not named last frame
         if np.isfinite(pred[[LS, RS]]).all():
-            # a wrist unseen last frame (its prediction stale) costs for being nearer the other
+            # a wrist not named last frame (its prediction stale) costs for being nearer the other
             # shoulder than its own: arms cross little, and two hands on one sword hilt part
             # with one stale prediction between them
             dl, dr = (np.linalg.norm(X - pred[s], axis=1) for s in (LS, RS))
@@ -329,6 +333,8 @@ class Labeller:
             if f is not None and float(f @ self._facing) < limit:
                 out[[LS, RS]] = np.nan
                 assign[[LS, RS]] = arow[[LS, RS]] = -1
+        if right is not None:
+            self._shoulder_over_wrist(pts, out, assign, arow, right)
         # markers left out, or dropped above, found again from the free points
         lost_before = assign < 0
         self._recover(pts, pred, assign, arow, row_pt)
@@ -347,6 +353,28 @@ class Labeller:
         self.stats.overridden += over
         resid = float(np.sqrt(np.mean(d_eff[arow[named], named] ** 2))) if named.size else float("nan")
         return out, LabelQuality(int(named.size), P, margin, resid, "tracking", over), assign
+
+    def _shoulder_over_wrist(self, pts: Points3D, out: np.ndarray, assign: np.ndarray, arow: np.ndarray,
+                             right: np.ndarray) -> None:
+        """A shoulder left unnamed while its wrist is named on the point where the other
+        shoulder puts it (a shoulder width along the subject's right (3,), within 1.5 rigid
+        tolerances: the facing lags a few frames; level with it) gets
+        that point back, and the wrist is left to be found again: a hand passing in front of
+        its shoulder merges with it, and when they part the wrist's track can take the
+        shoulder's point, the shoulder's the hand's; the shoulder width then drops the
+        shoulder, and nothing told the wrist it sat on a shoulder. out (8, 3), assign, arow
+        (8,) in place."""
+        body = self._body
+        for s, w, other, sign in ((LS, LW, RS, -1.0), (RS, RW, LS, 1.0)):
+            p = assign[w]
+            if assign[s] >= 0 or assign[other] < 0 or p < 0 or np.count_nonzero(assign == p) > 1:
+                continue
+            anchor = out[other] + sign * body.shoulder_width * right
+            if np.linalg.norm(pts.X[p] - anchor) > 1.5 * body.tol or abs(pts.X[p, 2] - out[other][2]) > 0.1:
+                continue
+            assign[s], arow[s], out[s] = p, arow[w], pts.X[p]
+            assign[w] = arow[w] = -1
+            out[w] = np.nan
 
     def _recover(self, pts: Points3D, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
                  row_pt: np.ndarray) -> None:

@@ -329,11 +329,10 @@ class PointReconstructor:
         accepted point is seen in merged blobs in >= 2 views and in one view by a single blob
         with a free single blob within ``part_px``, the two markers are placed on those two
         blobs' rays, each at its point nearest the merged views' point (the rays are nearly
-        parallel, so their depths come from it), if they end up
-        ``min_separation_m`` apart and both project inside every merged blob. The first
-        replaces the point, the second is appended (candidate arrays grown, its index added
-        to idx). Returns X, err, n_views, blob, uv, missing, idx and (len(idx),) bool, the
-        points placed so."""
+        parallel, so their depths come from it), if they end up ``min_separation_m`` apart and
+        both project inside every merged blob. The first replaces the point, the second is
+        appended (candidate arrays grown, its index added to idx). Returns X, err, n_views,
+        blob, uv, missing, idx and (len(idx),) bool, the points placed so."""
         cfg = self.config
         parted = np.zeros(len(idx), bool)
         new: list[tuple[int, np.ndarray, int, int]] = []  # (k, X of the second, view, its blob)
