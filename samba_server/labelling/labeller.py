@@ -333,8 +333,6 @@ class Labeller:
             if f is not None and float(f @ self._facing) < limit:
                 out[[LS, RS]] = np.nan
                 assign[[LS, RS]] = arow[[LS, RS]] = -1
-        if right is not None:
-            self._shoulder_over_wrist(pts, out, assign, arow, right)
         # markers left out, or dropped above, found again from the free points
         lost_before = assign < 0
         self._recover(pts, pred, assign, arow, row_pt)
@@ -353,28 +351,6 @@ class Labeller:
         self.stats.overridden += over
         resid = float(np.sqrt(np.mean(d_eff[arow[named], named] ** 2))) if named.size else float("nan")
         return out, LabelQuality(int(named.size), P, margin, resid, "tracking", over), assign
-
-    def _shoulder_over_wrist(self, pts: Points3D, out: np.ndarray, assign: np.ndarray, arow: np.ndarray,
-                             right: np.ndarray) -> None:
-        """A shoulder left unnamed while its wrist is named on the point where the other
-        shoulder puts it (a shoulder width along the subject's right (3,), within 1.5 rigid
-        tolerances: the facing lags a few frames; level with it) gets
-        that point back, and the wrist is left to be found again: a hand passing in front of
-        its shoulder merges with it, and when they part the wrist's track can take the
-        shoulder's point, the shoulder's the hand's; the shoulder width then drops the
-        shoulder, and nothing told the wrist it sat on a shoulder. out (8, 3), assign, arow
-        (8,) in place."""
-        body = self._body
-        for s, w, other, sign in ((LS, LW, RS, -1.0), (RS, RW, LS, 1.0)):
-            p = assign[w]
-            if assign[s] >= 0 or assign[other] < 0 or p < 0 or np.count_nonzero(assign == p) > 1:
-                continue
-            anchor = out[other] + sign * body.shoulder_width * right
-            if np.linalg.norm(pts.X[p] - anchor) > 1.5 * body.tol or abs(pts.X[p, 2] - out[other][2]) > 0.1:
-                continue
-            assign[s], arow[s], out[s] = p, arow[w], pts.X[p]
-            assign[w] = arow[w] = -1
-            out[w] = np.nan
 
     def _recover(self, pts: Points3D, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
                  row_pt: np.ndarray) -> None:
