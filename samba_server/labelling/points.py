@@ -11,8 +11,9 @@ Per frame (:func:`reconstruct_points`):
    ``support_px`` (plus the radius of a merged blob), then is triangulated again from all its
    views (views off by more than the triangulator's ``max_error_px`` are dropped when >= 3);
 4. the candidates are accepted greedily, best first (more views, fewer *unexplained* views,
-   smaller error): a blob is used at most once, a merged blob twice, and two accepted points
-   are never closer than ``min_separation_m``;
+   smaller error; a 2-view candidate more than ``body_radius_m`` from the >= 3-view ones
+   counts two more unexplained views): a blob is used at most once, a merged blob twice, and
+   two accepted points are never closer than ``min_separation_m``;
 5. a point seen only in merged blobs that each hold one other point (a marker hidden behind
    another wherever it is seen) lies at the two markers' midpoint: it is reflected through the
    other point (:meth:`PointReconstructor._mirror`);
@@ -56,6 +57,7 @@ class PointsConfig:
     max_range_m: float = 12.0  #: points farther than this from every camera are rejected
     max_points: int = 24  #: at most this many points per frame (best first)
     double_size_ratio: float = 1.5  #: a point whose blobs are this many times a typical point's holds two markers
+    body_radius_m: float = 1.5  #: 2-view points farther than this (horizontally) from the >= 3-view points' median rank lower
     part_px: float = 6.0  #: two single blobs this close in the one view that parts two otherwise merged markers
 
 
@@ -200,7 +202,14 @@ class PointReconstructor:
         ok = (n_views >= 2) & self._plausible(X)
         # greedy acceptance, best first
         missing = (inside & (blob < 0) & ~in_merged).sum(axis=0)
-        order = np.lexsort((np.nan_to_num(err, nan=1e9), missing, -n_views))
+        # a 2-view candidate far from the body (a distractor's blob with a marker's, where no
+        # other camera looks) ranks as if two more views missed it: it stole a marker's blob
+        far = np.zeros(len(X), bool)
+        sure = ok & (n_views >= 3)
+        if np.count_nonzero(sure) >= 3:
+            centre = np.median(X[sure, :2], axis=0)
+            far = (n_views < 3) & (np.linalg.norm(np.nan_to_num(X[:, :2]) - centre, axis=1) > cfg.body_radius_m)
+        order = np.lexsort((np.nan_to_num(err, nan=1e9), missing + 2 * far, -n_views))
         cap = [v.capacity.copy() for v in views]
         seen: set[tuple] = set()
         keep: list[int] = []
