@@ -15,7 +15,7 @@ from samba_mote.sim.tpose import stance_offset, tpose
 from samba_server.labelling import Labeller
 from samba_server.labelling.labeller import LabelConfig
 from samba_server.labelling.blobs import view_blobs
-from samba_server.labelling.points import PointReconstructor
+from samba_server.labelling.points import PointReconstructor, Points3D
 from samba_server.triangulate import Triangulator
 
 FPS = 60.0
@@ -391,16 +391,25 @@ def test_a_leg_crossing_over_the_other_keeps_its_names():
     assert right[10:].all(), np.argwhere(~right[10:])[:5]
 
 
+def _points_from_blobs(blobs: list) -> Points3D:
+    """3D points of one frame of the default 4-camera rig from per-camera blob lists
+    [[u, v, capacity, radius (px)], ...] (a traced frame of a rendered take), with the
+    triangulator settings of configs/server.toml."""
+    from samba_server.labelling.blobs import ViewBlobs
+    from samba_server.triangulate import TriangulateConfig
+    rig = default_rig(4)
+    pr = PointReconstructor(rig, Triangulator(rig, TriangulateConfig(max_error_px=1.0)))
+    views = [ViewBlobs(np.array(b)[:, :2], np.array(b)[:, 2].astype(np.int64), np.array(b)[:, 3],
+                       np.full(len(b), -1, np.int64)) for b in blobs]
+    return pr.reconstruct(views)
+
+
 def test_two_markers_merged_in_all_views_but_one_become_two_points():
     """Knees passing each other in a walk (blobs of a rendered take, traced): one merged blob
     in three views, two blobs 2.7 px apart in the fourth. The merged blobs and one of the two
     made a single point 4.6 cm from the left knee and the right knee's blob stayed unused (the
     right knee was then placed 9 cm off). Now each of the two blobs gives a point on its ray
     at the merged point's depth."""
-    from samba_server.labelling.blobs import ViewBlobs
-    from samba_server.triangulate import TriangulateConfig
-    rig = default_rig(4)
-    pr = PointReconstructor(rig, Triangulator(rig, TriangulateConfig(max_error_px=1.0)))  # configs/server.toml
     blobs = [  # per camera: u, v, capacity, radius (px)
         [[5.04, 36.14, 1, 1.38], [9.09, 101.7, 2, 1.78], [42.39, 47.12, 1, 1.38], [44.99, 37.33, 1, 1.49],
          [47.73, 66.1, 2, 1.78], [49.62, 58.19, 2, 1.78], [51.59, 37.26, 1, 1.13], [56.34, 45.07, 1, 1.26]],
@@ -412,10 +421,8 @@ def test_two_markers_merged_in_all_views_but_one_become_two_points():
         [[12.8, 50.22, 1, 2.19], [16.32, 99.83, 1, 2.11], [17.39, 51.08, 1, 2.26], [22.42, 68.3, 1, 2.33],
          [23.04, 83.65, 2, 2.93], [152.85, 65.42, 1, 1.49], [153.83, 22.74, 1, 1.69]],
     ]
-    views = [ViewBlobs(np.array(b)[:, :2], np.array(b)[:, 2].astype(np.int64), np.array(b)[:, 3],
-                       np.full(len(b), -1, np.int64)) for b in blobs]
     knees = np.array([[-0.222, -2.131, 0.549], [-0.075, -2.083, 0.563]])  # the take's truth
-    got = pr.reconstruct(views)
+    got = _points_from_blobs(blobs)
     off = np.linalg.norm(got.X[:, None] - knees[None], axis=2).min(axis=0)
     assert (off < 0.04).all(), off
 
@@ -448,10 +455,6 @@ def test_a_ghost_far_from_the_body_does_not_take_a_markers_blob():
     and took its blob: the wrist had no point for half a second. A 2-view candidate far from
     the body now ranks as if two more views missed it, and the wrist's error (0.006 px
     against the ghost's 0.35) decides."""
-    from samba_server.labelling.blobs import ViewBlobs
-    from samba_server.triangulate import TriangulateConfig
-    rig = default_rig(4)
-    pr = PointReconstructor(rig, Triangulator(rig, TriangulateConfig(max_error_px=1.0)))  # configs/server.toml
     blobs = [  # per camera: u, v, capacity, radius (px)
         [[5.06, 36.14, 1, 1.38], [9.11, 101.69, 1, 1.78], [74.91, 79.49, 1, 1.6], [79.93, 70.49, 1, 1.6],
          [83.18, 80.43, 1, 1.6], [83.67, 44.94, 1, 1.6], [86.84, 68.2, 1, 1.6], [87.95, 43.36, 1, 1.78],
@@ -464,8 +467,6 @@ def test_a_ghost_far_from_the_body_does_not_take_a_markers_blob():
         [[72.84, 46.23, 1, 1.6], [76.85, 81.04, 1, 1.69], [80.91, 67.32, 2, 2.19], [82.13, 42.81, 1, 1.6],
          [152.84, 65.38, 1, 1.49], [153.82, 22.73, 1, 1.6]],
     ]
-    views = [ViewBlobs(np.array(b)[:, :2], np.array(b)[:, 2].astype(np.int64), np.array(b)[:, 3],
-                       np.full(len(b), -1, np.int64)) for b in blobs]
     left_wrist = np.array([-0.303, 0.022, 1.123])  # the take's truth
-    got = pr.reconstruct(views)
+    got = _points_from_blobs(blobs)
     assert np.min(np.linalg.norm(got.X - left_wrist, axis=1)) < 0.01
