@@ -38,7 +38,7 @@ import numpy as np
 
 from samba_common.calib import CameraRig
 
-from ..triangulate import Triangulator
+from ..triangulate import TriangulationResult, Triangulator
 from .blobs import ViewBlobs, percentile
 
 __all__ = ["PointsConfig", "Points3D", "PointReconstructor"]
@@ -318,9 +318,7 @@ class PointReconstructor:
             own = [c for c in np.flatnonzero(blob[:, j] >= 0) if views[c].capacity[blob[c, j]] <= 1]
             if len(own) < 2:
                 continue
-            sub = np.full((self.C, 1, 2), np.nan)
-            sub[own, 0] = uv[own, j]
-            res = self.tri.triangulate(sub)
+            res = self._triangulate_views(uv, j, own)
             reflected = 2.0 * X[k] - res.points[0]
             if res.n_views[0] < 2 or not self._plausible(reflected[None])[0]:
                 continue
@@ -357,9 +355,7 @@ class PointReconstructor:
             free = np.flatnonzero((d > 0) & (d <= cfg.part_px) & (cap[c] > 0) & (v.capacity <= 1))
             if len(free) != 1:
                 continue
-            sub = np.full((self.C, 1, 2), np.nan)
-            sub[merged, 0] = uv[merged, k]
-            mid = self.tri.triangulate(sub).points[0]
+            mid = self._triangulate_views(uv, k, merged).points[0]
             if not np.isfinite(mid).all():
                 continue
             cam = self.rig.cameras[c]
@@ -395,15 +391,19 @@ class PointReconstructor:
         idx = np.r_[idx, K + np.arange(len(new))]
         return X, err, n_views, blob, uv, missing, idx, np.r_[parted, np.ones(len(new), bool)]
 
+    def _triangulate_views(self, uv: np.ndarray, k: int, cams: list[int]) -> TriangulationResult:
+        """Candidate k triangulated from the views ``cams`` only (uv: (C, K, 2) px of the
+        candidates' blobs): the triangulator's result for one point."""
+        sub = np.full((self.C, 1, 2), np.nan)
+        sub[cams, 0] = uv[cams, k]
+        return self.tri.triangulate(sub)
+
     def _reduce(self, k: int, drop: list[int], X: np.ndarray, err: np.ndarray, n_views: np.ndarray,
                 blob: np.ndarray, uv: np.ndarray) -> bool:
         """Triangulate candidate k again without the views ``drop``; update X, err, n_views and
         blob in place. False when the rest does not make a point (fewer than 2 views left after the
         triangulator's outlier test, or outside the capture volume)."""
-        sub = uv[:, k:k + 1].copy()
-        sub[drop] = np.nan
-        sub[blob[:, k] < 0] = np.nan
-        res = self.tri.triangulate(sub)
+        res = self._triangulate_views(uv, k, [c for c in np.flatnonzero(blob[:, k] >= 0) if c not in drop])
         if res.n_views[0] < 2 or not self._plausible(res.points)[0]:
             return False
         X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
