@@ -92,6 +92,11 @@ def _unit2(v: np.ndarray) -> np.ndarray | None:
     return None if n < 1e-6 else np.array([v[0], v[1]]) / n
 
 
+def _ankle_above_knee(X: np.ndarray, k: int, a: int) -> bool:
+    """Ankle point a lies more than 10 cm above knee point k: not one leg."""
+    return bool(X[a, 2] > X[k, 2] + 0.1)
+
+
 def _leg_penalty(X: np.ndarray, s: np.ndarray, k: int, a: int, body: Body) -> float | None:
     """Penalty of knee point k and ankle point a (-1 = unnamed) for the side whose shoulder is
     at s (3,), or None when the rigid lengths do not allow them."""
@@ -113,7 +118,7 @@ def _leg_penalty(X: np.ndarray, s: np.ndarray, k: int, a: int, body: Body) -> fl
     near = min(2.0, _NEAR_W * max(0.0, _NEAR_F * body.trunk - dk))
     if a < 0:
         return near
-    if a == k or X[a, 2] > X[k, 2] + 0.1:
+    if a == k or _ankle_above_knee(X, k, a):
         return None
     err = body.shin_error(X[k], X[a])
     if err > body.tol or np.linalg.norm(X[a] - s) > reach_a:
@@ -185,7 +190,7 @@ def _legs_score(X: np.ndarray, trust: np.ndarray, L: int, R: int, left: tuple[in
     kl, kr = _share(kl, kr, shared)
     al, ar = _share(al, ar, shared)
     for k, a in ((kl, al), (kr, ar)):
-        if k >= 0 and a >= 0 and X[a, 2] > X[k, 2] + 0.1:
+        if k >= 0 and a >= 0 and _ankle_above_knee(X, k, a):
             return None  # shared across the sides, a knee point ended up below its ankle's
     # a shared point names two markers, a little less surely than two points do (int: numpy
     # bools add as "or")
