@@ -42,7 +42,7 @@ from samba_mote.sim.take import load_motion, make_take, prepare_motion  # noqa: 
 from samba_server.app import load_server_configs  # noqa: E402
 from samba_server.labelling.score import score_take, separable_visible  # noqa: E402
 from samba_server.process import process_videos  # noqa: E402
-from samba_server.recon.db import build_db  # noqa: E402
+from samba_server.recon.db import MotionDB, build_db  # noqa: E402
 from samba_server.recon.evaluate import vary_body  # noqa: E402
 from samba_server.recon.reconstruct import Reconstructor  # noqa: E402
 from samba_server.server import Server, ServerConfig  # noqa: E402
@@ -93,9 +93,12 @@ def main() -> int:
     configs = load_server_configs(None)
     rows: list[str] = []
     agg: dict[tuple[int, str], list] = {(c, k): [] for c in args.cameras for k in ("tuned", "unseen")}
+    dbs: dict[str, MotionDB] = {}
     for clip in args.clips:
         subject = clip.split("_")[0]
-        db = build_db([f for f in files if not f.name.startswith(subject + "_")], fps=30.0)
+        if subject not in dbs:  # one database per held-out subject, shared by its clips
+            dbs[subject] = build_db([f for f in files if not f.name.startswith(subject + "_")], fps=30.0)
+        db = dbs[subject]
         joints, t, _fps = load_motion(data / f"{clip}.bvh", 0.0, args.seconds)
         # the body depends on the seed and the clip only: a take is the same with --clips
         joints, _lengths = vary_body(joints, np.random.default_rng([args.seed, zlib.crc32(clip.encode())]))
