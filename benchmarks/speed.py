@@ -2,8 +2,9 @@
 
 Times ``Reconstructor.solve`` (alignment, KD-tree search, pseudo-poses, local PCA prior, linear
 start, Levenberg-Marquardt) frame by frame on held-out takes (a database without the take's
-subject), for K=10, N=10 (the thesis' choice: 23.5 ms, 49 iterations) and for K=100, N=0
-(thesis: 88.6 ms, 78 iterations), and K=10, N=10 on the same takes with skin markers solved
+subject), for Samba's default (configs/reconstruct.toml: K=240 neighbours, N=1 pseudo-pose
+each), for K=10, N=10 (the thesis' choice: 23.5 ms, 49 iterations) and for K=100, N=0
+(thesis: 88.6 ms, 78 iterations), and the default on the same takes with skin markers solved
 through the marker model (known offsets), side by side in one run. Prints median and p95 ms/frame and
 mean LM iterations, and records them in docs/BENCHMARKS.md.
 
@@ -38,7 +39,8 @@ from samba_common.markerset import markers_from_joints, vary_offsets  # noqa: E4
 from samba_common.skeleton import MARKER_JOINT  # noqa: E402
 
 CLIPS = ("002_05", "005_02", "006_10")  # punch, dance, basketball
-SKIN = "K=10, N=10, skin markers + offsets"
+DEFAULT = f"K={ReconstructConfig().k}, N={ReconstructConfig().pseudo} (default)"
+SKIN = "default, skin markers + offsets"
 
 
 def time_take(rec: Reconstructor, markers: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -64,7 +66,7 @@ def main() -> int:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     rng = np.random.default_rng(3)
     full = load_default_db()
-    configs = {"K=10, N=10": replace(ReconstructConfig(), k=10, pseudo=10),
+    configs = {DEFAULT: ReconstructConfig(), "K=10, N=10": replace(ReconstructConfig(), k=10, pseudo=10),
                "K=100, N=0": replace(ReconstructConfig(), k=100, pseudo=0)}
     results: dict[str, list] = {name: [[], [], []] for name in (*configs, SKIN)}  # per-round medians, all ms, iterations
     takes = []
@@ -83,7 +85,7 @@ def main() -> int:
         srng = np.random.default_rng([3, len(takes)])
         offsets = vary_offsets(srng)
         skin = markers_from_joints(truth, offsets) + (markers - truth[:, list(MARKER_JOINT)])
-        recs[SKIN] = (Reconstructor(db, configs["K=10, N=10"], estimate_lengths(skin, db.mean_lengths, offsets), offsets), skin)
+        recs[SKIN] = (Reconstructor(db, configs[DEFAULT], estimate_lengths(skin, db.mean_lengths, offsets), offsets), skin)
         takes.append((markers, t, recs))
     for _round in range(args.rounds):
         for name in (*configs, SKIN):  # configurations side by side in every round

@@ -153,10 +153,13 @@ def knn(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, q_ra
             for j in range(start[nd], end[nd]):
                 p = perm[j]
                 s = 0.0
-                for c in range(D):
+                bound = best_d[k - 1]
+                for c in range(D):  # the principal axes come first: most points fail early
                     diff = data[p, c] - q[c]
                     s += diff * diff
-                if s < best_d[k - 1]:
+                    if s >= bound:
+                        break
+                if s < bound:
                     pos = k - 1
                     while pos > 0 and best_d[pos - 1] > s:
                         best_d[pos] = best_d[pos - 1]

@@ -64,8 +64,8 @@ class ReconstructConfig:
     computed in a background thread; a replay swaps at the same frame).
     """
 
-    k: int = 10
-    pseudo: int = 10
+    k: int = 100
+    pseudo: int = 1
     ball_sigma_deg: float = 6.0
     hinge_sigma_deg: float = 8.0
     prior_floor_deg: float = 5.0
