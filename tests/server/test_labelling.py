@@ -177,6 +177,40 @@ def test_tracking_gone_wrong_is_corrected_by_a_fresh_identification(audit):
         assert not right[60 + int(0.2 * FPS):].any()
 
 
+@pytest.mark.parametrize("unglue", [True, False])
+def test_a_wrist_that_took_its_shoulders_point_gives_it_back(unglue):
+    """A hand passing its shoulder can leave the wrist's track on the shoulder's point and the
+    shoulder unnamed; the fresh identification cannot switch (it names no more markers). A
+    wrist held a shoulder width from the other shoulder for 0.3 s is the shoulder: mid-take the
+    left wrist's track is moved onto the left shoulder and the shoulder's track dropped; the
+    names are right again within 0.5 s, and stay wrong without the rule."""
+    from dataclasses import replace
+
+    from samba_server.labelling.rigid import LS, LW
+
+    rig = default_rig(4)
+    truth = _motion(3.0)
+    cfg = LabelConfig() if unglue else replace(LabelConfig(), glued_wrist_s=float("inf"))
+    lab = Labeller(rig, config=cfg)
+    lab.set_lengths(DEFAULT_LENGTHS)
+    rng = np.random.default_rng(8)
+    named = []
+    for i, m in enumerate(truth):
+        if i == 60:
+            lab._pos[LW], lab._vel[LW] = lab._pos[LS], lab._vel[LS]
+            lab._pos[LS], lab._seen[LS] = np.nan, -np.inf
+        got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
+        named.append(got)
+    named = np.array(named)
+    right = _right(named, truth).all(axis=1)
+    assert right[:60].all()
+    assert np.linalg.norm(named[61, LW] - truth[61, LS]) < 0.02  # the wrist did take the shoulder's point
+    if unglue:
+        assert right[60 + int(0.5 * FPS):].all()
+    else:
+        assert not right[60 + int(0.5 * FPS):].any()
+
+
 def test_static_reflections_in_3d_are_not_markers_and_do_not_keep_auditing():
     """Three shiny objects seen by every camera (3D-consistent points that never move): never
     named, and once known as static they do not set off identification audits."""
