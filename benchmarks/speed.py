@@ -2,8 +2,8 @@
 
 Times ``Reconstructor.solve`` (alignment, KD-tree search, pseudo-poses, local PCA prior, linear
 start, Levenberg-Marquardt) frame by frame on held-out takes (a database without the take's
-subject), for Samba's default (configs/reconstruct.toml: K=240 neighbours, N=1 pseudo-pose
-each), for K=10, N=10 (the thesis' choice: 23.5 ms, 49 iterations) and for K=100, N=0
+subject), for Samba's default (K neighbours and N pseudo-poses each from
+configs/reconstruct.toml), for K=10, N=10 (the thesis' choice: 23.5 ms, 49 iterations) and for K=100, N=0
 (thesis: 88.6 ms, 78 iterations), and the default on the same takes with skin markers solved
 through the marker model (known offsets), side by side in one run. Prints median and p95 ms/frame and
 mean LM iterations, and records them in docs/BENCHMARKS.md.
