@@ -146,7 +146,6 @@ class Labeller:
         self._t_good = -np.inf          # last frame where tracking explained the points
         self._t_lost: float | None = None  # first frame with points after the labels were lost
         self._t_ambiguous: float | None = None
-        self._amb_votes: list[np.ndarray] = []  # facings of each frame's best identification while waiting
         self._shared = np.zeros(N_MARKERS, bool)
         self._t_audit = -np.inf
         self._t_frame = self._t_prev = -np.inf  # this frame's and the previous frame's times
@@ -175,7 +174,6 @@ class Labeller:
         self._skel = []
         self._facing = None
         self._t_lost = self._t_ambiguous = None
-        self._amb_votes = []
         self._free_hist = []
         self._glue = ([], [])
 
@@ -204,7 +202,6 @@ class Labeller:
             if explained:
                 self._t_good = t
             if t - self._t_good <= self.config.lost_after:
-                self._t_ambiguous, self._amb_votes = None, []  # not waiting for an identification
                 audited = self._audit(pts, out, assign, q, t)
                 if audited is not None:
                     out, q = audited
@@ -582,17 +579,9 @@ class Labeller:
             return None
         hyps = identify(pts.X, self._trust(pts), self._body, self._hint(t), shared=pts.merged_all)
         if not hyps:
-            self._t_ambiguous, self._amb_votes = None, []
+            self._t_ambiguous = None
             return None
         best = hyps[0]
-        # while waiting for a clear identification, a frame whose best turns the body by more
-        # than 45 degrees from the last frame's best is not taken (a body does not turn so in
-        # one frame: its shoulder points were off, e.g. a hand merged with one)
-        cos45 = math.cos(math.radians(45.0))
-        jumped = bool(self._amb_votes) and float(self._amb_votes[-1] @ best.facing) < cos45
-        self._amb_votes.append(best.facing)
-        if jumped and self._t_ambiguous is not None and t - self._t_ambiguous < 3 * cfg.max_wait:
-            return None
         margin = best.score - hyps[1].score if len(hyps) > 1 else best.score
         labels = best.labels.copy()
         if margin < cfg.min_margin:
@@ -605,14 +594,9 @@ class Labeller:
                     self._t_ambiguous = t
                 if t - self._t_ambiguous < cfg.max_wait:
                     return None
-                # the wait is over: of the close hypotheses, the one facing where the frames'
-                # best did most often while waiting (the last frame alone flips between mirror
-                # labellings of a symmetric pose)
-                support = [sum(float(v @ h.facing) >= cos45 for v in self._amb_votes) for h in [best] + close]
-                best = ([best] + close)[int(np.argmax(support))]
                 labels = best.labels.copy()
-        self._t_ambiguous, self._amb_votes = None, []
-        margin = max(_margin(labels, best.score, [h for h in hyps if h is not best]), 0.0)
+        self._t_ambiguous = None
+        margin = _margin(labels, best.score, hyps[1:])
         out = self._named(pts, labels, best.facing)
         named = labels >= 0
         self.stats.identifications += 1

@@ -211,55 +211,6 @@ def test_a_wrist_that_took_its_shoulders_point_gives_it_back(unglue):
         assert not right[60 + int(0.5 * FPS):].any()
 
 
-@pytest.mark.parametrize("vote", [True, False])
-def test_an_ambiguous_identification_goes_by_the_waits_majority_not_its_last_frame(monkeypatch, vote):
-    """After a blackout a symmetric pose (hands up at the shoulders) can score a labelling and
-    its mirror within a hair of each other, the best flipping from frame to frame (traced on a
-    swordplay take: the mirror was taken and held for 1.2 s). Scripted identifications: the
-    right labelling leads on 9 of 13 frames, its mirror on the last two. When the wait runs out
-    the majority is taken; the last frame's best alone would be the mirror."""
-    import samba_server.labelling.labeller as labeller_mod
-    from samba_server.labelling.identify import Hypothesis
-    from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
-
-    rig = default_rig(4)
-    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
-    rng = np.random.default_rng(3)
-    lab = Labeller(rig)
-    leads = "AAABAABAAABBB"
-    calls = iter(leads)
-    right_labels: list = []
-
-    def scripted(X, trust, body, hint=None, **kw):
-        truth_pt = np.argmin(np.linalg.norm(X[:, None] - pose[None], axis=2), axis=0)  # (8,) point per marker
-        a = truth_pt.copy()
-        b = truth_pt[[RS, LS, RW, LW, RK, LK, RA, LA]]  # the mirror labelling
-        right_labels.append(a)
-        lead = next(calls, "A")
-        ha = Hypothesis(a, 7.0 if lead == "A" else 6.95, np.array([0.0, 1.0]))
-        hb = Hypothesis(b, 7.0 if lead == "B" else 6.95, np.array([0.0, -1.0]))
-        return [ha, hb] if lead == "A" else [hb, ha]
-
-    monkeypatch.setattr(labeller_mod, "identify", scripted)
-    if not vote:  # the last frame's best decides: what the wait did before
-        monkeypatch.setattr(labeller_mod.Labeller, "_amb_votes", property(lambda self: [], lambda self, v: None),
-                            raising=False)
-    named = None
-    for i in range(len(leads)):
-        got, q = lab.label(_packets(rig, pose, i / FPS, rng), i / FPS)
-        if np.isfinite(got).any():
-            named = (i, got, q)
-            break
-    assert named is not None, "never identified"
-    i, got, q = named
-    assert i == len(leads) - 1  # the wait ran out on the last frame (0.2 s), not before
-    right = _right(got[None], pose[None], tol=0.05)[0]
-    if vote:
-        assert right.all(), got - pose
-    else:
-        assert not right[[LS, RS]].any()
-
-
 def test_static_reflections_in_3d_are_not_markers_and_do_not_keep_auditing():
     """Three shiny objects seen by every camera (3D-consistent points that never move): never
     named, and once known as static they do not set off identification audits."""
