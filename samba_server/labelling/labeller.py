@@ -265,7 +265,7 @@ class Labeller:
         cost = d_eff - cfg.hint_m * pts.votes[row_pt] + cfg.merged_m * pts.merged[row_pt, None] \
             + cfg.unexplained_m * ghostly[:, None]
         stale = self._seen < self._t_prev - 1e-6  # (8,) not named last frame
-        if np.isfinite(pred[[LS, RS]]).all():
+        if stale[[LW, RW]].any() and np.isfinite(pred[[LS, RS]]).all():
             # a wrist not named last frame (its prediction stale) costs for being nearer the other
             # shoulder than its own: arms cross little, and two hands on one sword hilt part
             # with one stale prediction between them
