@@ -504,3 +504,101 @@ def test_a_ghost_far_from_the_body_does_not_take_a_markers_blob():
     left_wrist = np.array([-0.303, 0.022, 1.123])  # the take's truth
     got = _points_from_blobs(blobs)
     assert np.min(np.linalg.norm(got.X - left_wrist, axis=1)) < 0.01
+
+
+def _legs_pose(left_ankle: np.ndarray, right_ankle: np.ndarray, left_knee_lift: float = 0.0) -> np.ndarray:
+    """Markers (8, 3) of the hip-width standard pose with the left knee raised forward by
+    left_knee_lift (m, along a circle about the hip) and each ankle moved to x, y = the (2,)
+    given, its height set so that the shin keeps its length."""
+    from samba_server.labelling.rigid import LA, LK, RA, RK
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)].copy()
+    shin = float(np.linalg.norm(pose[LK] - pose[LA]))
+    thigh = float(DEFAULT_LENGTHS[6])
+    if left_knee_lift:
+        hip_z = pose[LK, 2] + thigh
+        pose[LK, 1] += left_knee_lift
+        pose[LK, 2] = hip_z - np.sqrt(thigh ** 2 - left_knee_lift ** 2)
+    for k, a, xy in ((LK, LA, left_ankle), (RK, RA, right_ankle)):
+        dxy = np.asarray(xy) - pose[k, :2]
+        pose[a] = [xy[0], xy[1], pose[k, 2] - np.sqrt(shin ** 2 - dxy @ dxy)]
+    return pose
+
+
+def _blend(a: np.ndarray, b: np.ndarray, n: int, start: int, frames: int) -> np.ndarray:
+    """(n, 8, 3): pose a, moving linearly to b over `frames` from `start`, then b."""
+    s = np.clip((np.arange(n) - start) / frames, 0.0, 1.0)[:, None, None]
+    return a[None] + s * (b - a)[None]
+
+
+@pytest.mark.parametrize("rule", [True, False])
+def test_a_swapped_ankle_pair_that_breaks_both_shins_is_swapped_back(rule):
+    """A dancer's raised leg with its foot drawn under the body: the ankles side by side, one
+    high, one on the floor. The ankles' names are swapped mid-take (as when the feet part from a
+    merged point the wrong way round): nothing is crossed, so only the shins tell, both broken
+    and both mended by swapping the ankles back. Right again at once with the rule; wrong to the
+    end without it."""
+    from dataclasses import replace
+
+    from samba_server.labelling.rigid import LA, LK, RA, RK
+
+    rig = default_rig(4)
+    stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
+    raised = _legs_pose(np.array([0.06, 0.22]), np.array([0.08, 0.0]), left_knee_lift=0.3)
+    truth = _blend(stand, raised, 120, 10, 40)
+    cfg = LabelConfig() if rule else replace(LabelConfig(), shin_swap_min=float("inf"))
+    lab = Labeller(rig, config=cfg)
+    lab.set_lengths(DEFAULT_LENGTHS)
+    body = lab._body
+    sw = raised.copy()
+    sw[[LA, RA]] = raised[[RA, LA]]
+    assert min(body.shin_error(sw[LK], sw[LA]), body.shin_error(sw[RK], sw[RA])) > 0.5 * body.tol  # both broken
+    assert abs(float(sw[RA, 0] - sw[LA, 0])) < 0.06  # and nothing crossed
+    rng = np.random.default_rng(9)
+    named = []
+    for i, m in enumerate(truth):
+        if i == 70:
+            for a in (lab._pos, lab._vel):
+                a[[LA, RA]] = a[[RA, LA]]
+        got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
+        named.append(got)
+    right = _right(np.array(named), truth).all(axis=1)
+    assert right[:70].all()
+    if rule:
+        assert right[70:].all()
+    else:
+        assert not right[75:].any()
+
+
+@pytest.mark.parametrize("rule", [True, False])
+def test_legs_named_with_the_knees_crossed_for_a_second_are_swapped_back(rule):
+    """Crossed feet (a dancer's fifth position: the ankles crossed, the knees not). Both legs'
+    names are swapped mid-take (knee and ankle together): the shins fit as well as before, and
+    the ankles now look uncrossed, but the knees cross, which thighs hardly ever do for long.
+    After 1 s of crossed knees the legs get their names back; without the rule they never do."""
+    from dataclasses import replace
+
+    from samba_server.labelling.rigid import LA, LK, RA, RK
+
+    rig = default_rig(4)
+    stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
+    fifth = _legs_pose(np.array([0.06, 0.07]), np.array([-0.06, -0.07]))
+    n = 200
+    truth = _blend(stand, fifth, n, 10, 40)
+    cfg = LabelConfig() if rule else replace(LabelConfig(), knees_crossed_s=float("inf"))
+    lab = Labeller(rig, config=cfg)
+    lab.set_lengths(DEFAULT_LENGTHS)
+    rng = np.random.default_rng(10)
+    named = []
+    for i, m in enumerate(truth):
+        if i == 70:
+            for a in (lab._pos, lab._vel):
+                a[[LK, RK, LA, RA]] = a[[RK, LK, RA, LA]]
+        got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
+        named.append(got)
+    right = _right(np.array(named), truth).all(axis=1)
+    assert right[:70].all()
+    assert not right[72:int(70 + 0.9 * FPS)].any()  # the swap held: nothing else caught it
+    if rule:
+        assert right[int(70 + 1.1 * FPS):].all()
+    else:
+        assert not right[int(70 + 1.1 * FPS):].any()
