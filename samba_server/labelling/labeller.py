@@ -66,6 +66,7 @@ class LabelConfig:
     turn_slack_deg: float = 45.0  #: ... plus this much (noise of the shoulder points) between labellings
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
     knees_crossed_s: float = 1.0  #: knees crossed (by crossed_m) this long are the legs' names swapped (inf: never)
+    arm_swap_s: float = 0.05  #: a shoulder off the shoulder width whose own wrist's point fits it this long swaps with that wrist (inf: never)
     shin_swap_min: float = 0.5  #: a leg pair is swapped when that mends a broken shin and the other shin is broken by at least this share of the tolerance (inf: never)
     track_timeout: float = 0.12  #: a marker unseen for longer is predicted from the skeleton
     skeleton_max_age: float = 0.4  #: the skeleton predicts markers up to this long after the last solved pose
@@ -150,6 +151,7 @@ class Labeller:
         self._t_ambiguous: float | None = None
         self._shared = np.zeros(N_MARKERS, bool)
         self._knees_crossed_since: float | None = None
+        self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
         self._t_audit = -np.inf
         self._t_frame = self._t_prev = -np.inf  # this frame's and the previous frame's times
         self._free_hist: list[tuple[float, np.ndarray]] = []  # (t, free sure points (F, 3)) over the last second
@@ -178,6 +180,7 @@ class Labeller:
         self._facing = None
         self._t_lost = self._t_ambiguous = None
         self._knees_crossed_since = None
+        self._arm_swap_since = [None, None]
         self._free_hist = []
         self._glue = ([], [])
 
@@ -331,6 +334,7 @@ class Labeller:
         _split_shared(out, assign, pred, cfg.merged_half_m, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
         self._swap_for_shins(out, assign, arow)
+        self._swap_arms(out, assign, arow, t)
         # rigid distances and facing: drop the worse-predicted marker of a violating group
         for group in self._body.violations(out):
             worst = max(group, key=lambda m: d[arow[m], m])
@@ -479,6 +483,30 @@ class Labeller:
             if max(errs) <= body.tol and (best is None or sum(errs) < best[0]):
                 best = (sum(errs), lm, rm)
         return None if best is None else (best[1], best[2])
+
+    def _swap_arms(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, t: float) -> None:
+        """A hand that rested on its shoulder (one merged point) parts from it with the names the
+        wrong way round as often as not, and tracking keeps them so. The shoulders are rigid: a
+        shoulder named more than half the tolerance off the shoulder width from the other one,
+        while its own wrist's point is within a sixth of it and level with the other shoulder
+        (``_LEVEL_M``), for ``arm_swap_s``, swaps names (and tracks) with that wrist. out (8, 3),
+        assign, arow (8,) in place."""
+        body = self._body
+        for i, (s, w, o) in enumerate(((LS, LW, RS), (RS, RW, LS))):
+            fits = assign[s] >= 0 and assign[w] >= 0 and assign[o] >= 0 and \
+                len({int(assign[s]), int(assign[w]), int(assign[o])}) == 3 and \
+                body.width_error(out[s], out[o]) > 0.5 * body.tol and \
+                body.width_error(out[w], out[o]) < body.tol / 6 and abs(float(out[w, 2] - out[o, 2])) <= _LEVEL_M
+            if not fits:
+                self._arm_swap_since[i] = None
+                continue
+            if self._arm_swap_since[i] is None:
+                self._arm_swap_since[i] = t
+            if t - self._arm_swap_since[i] >= self.config.arm_swap_s - 1e-6:
+                log.debug("t=%.3f s: shoulder %d and its wrist swapped: the wrist's point fits the shoulder width", t, s)
+                self._arm_swap_since[i] = None
+                for a in (assign, arow, out, self._pos, self._vel, self._seen):
+                    a[[s, w]] = a[[w, s]]
 
     def _uncross_knees(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray,
                        t: float) -> None:
@@ -724,6 +752,8 @@ def _split_shared(out: np.ndarray, assign: np.ndarray, pred: np.ndarray, half: f
         out[n] = out[n] - off
 
 
+#: m: shoulders are level within this (as identification's tilt allowance)
+_LEVEL_M = 0.06
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
 
 

@@ -602,3 +602,46 @@ def test_legs_named_with_the_knees_crossed_for_a_second_are_swapped_back(rule):
         assert right[int(70 + 1.1 * FPS):].all()
     else:
         assert not right[int(70 + 1.1 * FPS):].any()
+
+
+@pytest.mark.parametrize("rule", [True, False])
+def test_a_hand_leaving_its_shoulder_with_the_names_swapped_gets_them_back(rule):
+    """The right hand rests on its shoulder (washing: one merged point) and parts from it with
+    the two names the wrong way round (injected: the tracks swapped while the points touch).
+    Tracking keeps them swapped, the shoulder's name drifting away with the hand, in reach of
+    the arm and within the rigid tolerance of the shoulder width. With the rule the shoulder
+    width from the left shoulder tells them apart within 0.2 s of parting; without it they stay
+    swapped."""
+    from dataclasses import replace
+
+    from samba_server.labelling.rigid import RS, RW
+
+    rig = default_rig(4)
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("apart", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    on_shoulder = pose.copy()
+    on_shoulder[RW] = pose[RS] + [-0.03, 0.03, 0.0]
+    away = on_shoulder.copy()
+    away[RW] = pose[RS] + [-0.12, 0.25, -0.05]  # in front of the chest
+    n = 150
+    truth = _blend(pose, on_shoulder, n, 10, 40)
+    truth[70:] = _blend(on_shoulder, away, n - 70, 10, 30)
+    cfg = LabelConfig() if rule else replace(LabelConfig(), arm_swap_s=float("inf"))
+    lab = Labeller(rig, config=cfg)
+    lab.set_lengths(DEFAULT_LENGTHS)
+    rng = np.random.default_rng(11)
+    named = []
+    for i, m in enumerate(truth):
+        if i == 75:
+            for a in (lab._pos, lab._vel):
+                a[[RS, RW]] = a[[RW, RS]]
+        got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
+        named.append(got)
+    named = np.array(named)
+    right = _right(named, truth).all(axis=1)
+    assert right[:45].all()  # until the hand reaches the shoulder (then one merged point)
+    parted = 80 + int(np.argmax(np.linalg.norm(truth[80:, RW] - truth[80:, RS], axis=1) > 0.06))
+    assert np.linalg.norm(named[parted, RS] - truth[parted, RW]) < 0.02  # the names did leave swapped
+    if rule:
+        assert right[parted + int(0.2 * FPS):].all()
+    else:
+        assert not right[parted + int(0.2 * FPS):].any()
