@@ -333,7 +333,7 @@ class Labeller:
             self._uncross_knees(out, assign, arow, right, t)
         _split_shared(out, assign, pred, cfg.merged_half_m, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
-        self._swap_for_shins(out, assign, arow)
+        self._swap_for_shins(out, assign, arow, right)
         self._swap_arms(out, assign, arow, t)
         # rigid distances and facing: drop the worse-predicted marker of a violating group
         for group in self._body.violations(out):
@@ -452,37 +452,28 @@ class Labeller:
             assign[m] = p
             arow[m] = int(np.flatnonzero(row_pt == p)[0])
 
-    def _swap_for_shins(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray) -> None:
+    def _swap_for_shins(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray | None) -> None:
         """Both shins (knee-ankle distances) broken while all four leg markers are named on
-        points of their own, and swapping the ankle (or knee) pair mends them: that pair was
-        swapped (feet parting from a merged point the wrong way round). One broken shin beside a
-        good one is a bad point (a knee point off for a frame), not a swap. out (8, 3), assign,
-        arow (8,) in place."""
-        pair = self._shin_mending_pair(out, assign)
-        if pair is not None:
-            log.debug("t=%.3f s: %s swapped: both shins broken, swapped they fit", self._t_frame, pair)
-            for a in (assign, arow, out, self._pos, self._vel, self._seen):  # the tracks too
-                a[list(pair)] = a[list(pair[::-1])]
-
-    def _shin_mending_pair(self, out: np.ndarray, assign: np.ndarray) -> tuple[int, int] | None:
-        """The leg pair (left, right marker) whose swap mends the shins of out (8, 3), one broken and
-        the other off by ``shin_swap_min`` of the tolerance, and breaks none (the better fit when
-        both do), or None."""
+        points of their own, one by the tolerance, the other by ``shin_swap_min`` of it, and
+        mended by swapping one pair: that pair was swapped (feet parting from a merged point the
+        wrong way round). One broken shin beside a good one is a bad point (a knee point off
+        for a frame), not a swap. Swapping the knees or the ankles makes the same two shins, so
+        which pair is wrong comes from the knees' order along the subject's right (3,): knees
+        named crossed are the swapped pair (thighs hardly cross, feet often do), else the
+        ankles. out (8, 3), assign, arow (8,) in place; nothing when right is None."""
         legs = [LK, RK, LA, RA]
-        if (assign[legs] < 0).any() or len(set(assign[legs].tolist())) < 4:
-            return None
+        if right is None or (assign[legs] < 0).any() or len(set(assign[legs].tolist())) < 4:
+            return
         body = self._body
-        if min(body.shin_error(out[k], out[a]) for k, a in ((LK, LA), (RK, RA))) <= self.config.shin_swap_min * body.tol or \
-                max(body.shin_error(out[k], out[a]) for k, a in ((LK, LA), (RK, RA))) <= body.tol:
-            return None
-        best = None
-        for lm, rm in ((LA, RA), (LK, RK)):
-            sw = out.copy()
-            sw[[lm, rm]] = out[[rm, lm]]
-            errs = [body.shin_error(sw[k], sw[a]) for k, a in ((LK, LA), (RK, RA))]
-            if max(errs) <= body.tol and (best is None or sum(errs) < best[0]):
-                best = (sum(errs), lm, rm)
-        return None if best is None else (best[1], best[2])
+        shins = ((LK, LA), (RK, RA))
+        errs = sorted(body.shin_error(out[k], out[a]) for k, a in shins)
+        mended = [body.shin_error(out[k], out[a]) for k, a in ((LK, RA), (RK, LA))]
+        if errs[0] <= self.config.shin_swap_min * body.tol or errs[1] <= body.tol or max(mended) > body.tol:
+            return
+        pair = [LK, RK] if float((out[RK] - out[LK]) @ right) < 0 else [LA, RA]
+        log.debug("t=%.3f s: %s swapped: both shins broken, swapped they fit", self._t_frame, pair)
+        for a in (assign, arow, out, self._pos, self._vel, self._seen):  # the tracks too
+            a[pair] = a[pair[::-1]]
 
     def _swap_arms(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, t: float) -> None:
         """A hand that rested on its shoulder (one merged point) parts from it with the names the
