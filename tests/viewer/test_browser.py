@@ -27,12 +27,22 @@ def chromium(tmp_path, url: str, *args: str, budget_ms: int = 3000) -> subproces
     return subprocess.run(cmd, capture_output=True, text=True, timeout=90)
 
 
+def dump_dom(tmp_path, url: str, ready) -> subprocess.CompletedProcess:
+    """The page's DOM after Chromium ran it for a virtual-time budget: 6, then 15, then 30 s
+    until ``ready(dom)`` holds (virtual time runs ahead of the real-time stream on a loaded
+    machine, and the budget can end before the websocket's first messages arrived)."""
+    for attempt, budget in enumerate((6000, 15000, 30000)):
+        proc = chromium(tmp_path / f"try{attempt}", url, "--dump-dom", budget_ms=budget)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        if ready(proc.stdout):
+            break
+    return proc
+
+
 def test_poses_arrive_in_the_page(tmp_path, viewer):
-    with Publisher(viewer, seconds=30.0) as pub:
-        # virtual time runs ahead of the real-time stream on a loaded machine: a longer budget,
-        # and a stream of poses (not a count tied to the machine's speed) is what is checked
-        proc = chromium(tmp_path, viewer.url, "--dump-dom", budget_ms=6000)
-    assert proc.returncode == 0, proc.stderr[-2000:]
+    with Publisher(viewer, seconds=90.0) as pub:
+        # a stream of poses (not a count tied to the machine's speed) is what is checked
+        proc = dump_dom(tmp_path, viewer.url, lambda dom: int(re.search(r'data-poses="(\d+)"', dom).group(1)) >= 5)
     body = re.search(r"<body[^>]*>", proc.stdout).group(0)
     poses = int(re.search(r'data-poses="(\d+)"', body).group(1))
     assert 'data-connected="1"' in body
@@ -48,12 +58,13 @@ def test_screenshot_shows_the_skeleton(tmp_path, viewer):
     import matplotlib.image as mpimg
 
     # headless Chromium now and then captures the page before the WebGL canvas is composited
-    # (the HUD already shows the poses, the 3D view is blank): up to 3 captures, the best counts
+    # (the HUD already shows the poses, the 3D view is blank), more often on a loaded machine:
+    # up to 4 captures with longer and longer budgets, the best counts
     best = None
-    with Publisher(viewer, seconds=60.0):
-        for attempt in range(3):
+    with Publisher(viewer, seconds=120.0):
+        for attempt, budget in enumerate((4000, 8000, 15000, 25000)):
             shot = tmp_path / f"viewer{attempt}.png"
-            proc = chromium(tmp_path / f"try{attempt}", viewer.url, f"--screenshot={shot}", budget_ms=4000)
+            proc = chromium(tmp_path / f"try{attempt}", viewer.url, f"--screenshot={shot}", budget_ms=budget)
             assert proc.returncode == 0 and shot.exists(), proc.stderr[-2000:]
             img = mpimg.imread(shot)[..., :3]
             view = img[60:700, 300:600]  # the 3D view around the subject
