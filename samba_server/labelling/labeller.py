@@ -79,6 +79,7 @@ class LabelConfig:
     audit_margin: float = 1.0  #: ... and take the identification when it scores this much more than the tracked names
     audit_agree: float = 0.3  #: score, per marker, of agreeing with a tracked name in that identification
     audit_extend_margin: float = 0.5  #: an identification that only adds names to the tracked ones needs this much more
+    audit_move_margin: float = 2.0  #: ... and one that moves >= 2 tracked names to other points, naming < 2 more, this much
     facing_weight: float = 3.0  #: weight of the known facing when identifying ...
     facing_decay: float = 1.0  #: ... decaying with this time constant since it was known ...
     facing_turn_rate: float = 1.5  #: ... and free within this many rad/s since then (at most 90 degrees)
@@ -611,10 +612,16 @@ class Labeller:
         if margin < cfg.min_margin:
             return None
         tracked = score_labels(pts.X, trust, self._body, hint, assign, pts.merged_all)
+        # names moved from the point tracking gave them to another one, without naming two more
+        # markers (a leg named on the other leg moves two names and names the other two)
+        moved = int(np.count_nonzero((assign >= 0) & (best.labels >= 0) & (best.labels != assign)))
+        gained = int(np.count_nonzero(best.labels >= 0)) - int(np.count_nonzero(assign >= 0))
+        need = cfg.audit_extend_margin if extends else \
+            (cfg.audit_move_margin if moved >= 2 and gained < 2 else cfg.audit_margin)
         if tracked is None:
             if np.count_nonzero(best.labels >= 0) < q.n_labelled + 2:
                 return None
-        elif best.score - tracked < (cfg.audit_extend_margin if extends else cfg.audit_margin):
+        elif best.score - tracked < need:
             return None
         self.stats.audit_switches += 1
         log.debug("t=%.3f s: tracked names replaced by an identification (score %.2f over %s)", t, best.score,
