@@ -471,10 +471,9 @@ class Labeller:
         mended = [body.shin_error(out[k], out[a]) for k, a in ((LK, RA), (RK, LA))]
         if errs[0] <= self.config.shin_swap_min * body.tol or errs[1] <= body.tol or max(mended) > body.tol:
             return
-        pair = [LK, RK] if float((out[RK] - out[LK]) @ right) < 0 else [LA, RA]
+        pair = (LK, RK) if float((out[RK] - out[LK]) @ right) < 0 else (LA, RA)
         log.debug("t=%.3f s: %s swapped: both shins broken, swapped they fit", self._t_frame, pair)
-        for a in (assign, arow, out, self._pos, self._vel, self._seen):  # the tracks too
-            a[pair] = a[pair[::-1]]
+        self._swap([pair], out, assign, arow)
 
     def _swap_arms(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, t: float) -> None:
         """A hand that rested on its shoulder (one merged point) parts from it with the names the
@@ -497,8 +496,7 @@ class Labeller:
             if t - self._arm_swap_since[i] >= self.config.arm_swap_s - 1e-6:
                 log.debug("t=%.3f s: shoulder %d and its wrist swapped: the wrist's point fits the shoulder width", t, s)
                 self._arm_swap_since[i] = None
-                for a in (assign, arow, out, self._pos, self._vel, self._seen):
-                    a[[s, w]] = a[[w, s]]
+                self._swap([(s, w)], out, assign, arow)
 
     def _uncross_knees(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray,
                        t: float) -> None:
@@ -519,9 +517,14 @@ class Labeller:
         if t - self._knees_crossed_since >= self.config.knees_crossed_s:
             log.debug("t=%.3f s: knees crossed for %.2f s: the legs' names swapped", t, t - self._knees_crossed_since)
             self._knees_crossed_since = None
-            for lm, rm in ((LK, RK), (LA, RA)):  # the tracks too: their velocities carry on
-                for a in (assign, arow, out, self._pos, self._vel, self._seen):
-                    a[[lm, rm]] = a[[rm, lm]]
+            self._swap([(LK, RK), (LA, RA)], out, assign, arow)
+
+    def _swap(self, pairs: list[tuple[int, int]], out: np.ndarray, assign: np.ndarray, arow: np.ndarray) -> None:
+        """Swap the names of each (m, n) marker pair: out (8, 3), assign, arow (8,) in place, and
+        the tracks (position, velocity, last seen) with them, so their velocities carry on."""
+        for m, n in pairs:
+            for a in (out, assign, arow, self._pos, self._vel, self._seen):
+                a[[m, n]] = a[[n, m]]
 
     def _unglue(self, out: np.ndarray, assign: np.ndarray, t: float) -> None:
         """A wrist that took its shoulder's point (the hand passed the shoulder) stays there,
