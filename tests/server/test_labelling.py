@@ -529,6 +529,19 @@ def _blend(a: np.ndarray, b: np.ndarray, n: int, start: int, frames: int) -> np.
     s = np.clip((np.arange(n) - start) / frames, 0.0, 1.0)[:, None, None]
     return a[None] + s * (b - a)[None]
 
+def _run_swapping_tracks(lab, rig, truth, rng, at: int, markers: list[int]) -> np.ndarray:
+    """Label truth (F, 8, 3) frame by frame; before frame ``at`` the tracks (position,
+    velocity) of ``markers`` are reversed in order (a swap injected into tracking). (F, 8, 3)."""
+    named = []
+    for i, m in enumerate(truth):
+        if i == at:
+            for a in (lab._pos, lab._vel):
+                a[markers] = a[markers[::-1]]
+        got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
+        named.append(got)
+    return np.array(named)
+
+
 
 @pytest.mark.parametrize("rule", [True, False])
 def test_a_swapped_ankle_pair_that_breaks_both_shins_is_swapped_back(rule):
@@ -553,15 +566,8 @@ def test_a_swapped_ankle_pair_that_breaks_both_shins_is_swapped_back(rule):
     sw[[LA, RA]] = raised[[RA, LA]]
     assert min(body.shin_error(sw[LK], sw[LA]), body.shin_error(sw[RK], sw[RA])) > 0.5 * body.tol  # both broken
     assert abs(float(sw[RA, 0] - sw[LA, 0])) < 0.06  # and nothing crossed
-    rng = np.random.default_rng(9)
-    named = []
-    for i, m in enumerate(truth):
-        if i == 70:
-            for a in (lab._pos, lab._vel):
-                a[[LA, RA]] = a[[RA, LA]]
-        got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
-        named.append(got)
-    right = _right(np.array(named), truth).all(axis=1)
+    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(9), 70, [LA, RA])
+    right = _right(named, truth).all(axis=1)
     assert right[:70].all()
     if rule:
         assert right[70:].all()
@@ -587,15 +593,8 @@ def test_legs_named_with_the_knees_crossed_for_a_second_are_swapped_back(rule):
     cfg = LabelConfig() if rule else replace(LabelConfig(), knees_crossed_s=float("inf"))
     lab = Labeller(rig, config=cfg)
     lab.set_lengths(DEFAULT_LENGTHS)
-    rng = np.random.default_rng(10)
-    named = []
-    for i, m in enumerate(truth):
-        if i == 70:
-            for a in (lab._pos, lab._vel):
-                a[[LK, RK, LA, RA]] = a[[RK, LK, RA, LA]]
-        got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
-        named.append(got)
-    right = _right(np.array(named), truth).all(axis=1)
+    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(10), 70, [LK, LA, RA, RK])
+    right = _right(named, truth).all(axis=1)
     assert right[:70].all()
     assert not right[72:int(70 + 0.9 * FPS)].any()  # the swap held: nothing else caught it
     if rule:
@@ -628,15 +627,7 @@ def test_a_hand_leaving_its_shoulder_with_the_names_swapped_gets_them_back(rule)
     cfg = LabelConfig() if rule else replace(LabelConfig(), arm_swap_s=float("inf"))
     lab = Labeller(rig, config=cfg)
     lab.set_lengths(DEFAULT_LENGTHS)
-    rng = np.random.default_rng(11)
-    named = []
-    for i, m in enumerate(truth):
-        if i == 75:
-            for a in (lab._pos, lab._vel):
-                a[[RS, RW]] = a[[RW, RS]]
-        got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
-        named.append(got)
-    named = np.array(named)
+    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(11), 75, [RS, RW])
     right = _right(named, truth).all(axis=1)
     assert right[:45].all()  # until the hand reaches the shoulder (then one merged point)
     parted = 80 + int(np.argmax(np.linalg.norm(truth[80:, RW] - truth[80:, RS], axis=1) > 0.06))
