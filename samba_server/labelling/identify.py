@@ -26,7 +26,7 @@ from itertools import combinations
 
 import numpy as np
 
-from .rigid import LA, LK, LS, LW, RA, RK, RS, RW, Body
+from .rigid import LA, LEVEL_M, LK, LS, LW, RA, RK, RS, RW, Body
 
 __all__ = ["Hint", "Hypothesis", "identify", "right_of", "score_labels"]
 
@@ -38,7 +38,7 @@ _LATERAL_W, _LATERAL_M = 4.0, 0.03
 _CROSS_W = 0.4
 #: shoulders more than _TILT_M m apart in height cost _TILT_W per metre (a wrist at shoulder
 #: height a shoulder width away is not a shoulder)
-_TILT_W, _TILT_M = 10.0, 0.06
+_TILT_W, _TILT_M = 10.0, LEVEL_M
 #: an ankle named without its knee more than _HIGH_ANKLE_M m above the floor costs
 #: _HIGH_ANKLE_W per metre
 _HIGH_ANKLE_W, _HIGH_ANKLE_M = 2.0, 0.25

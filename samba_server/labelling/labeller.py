@@ -38,7 +38,7 @@ from ..triangulate import Triangulator
 from .blobs import view_blobs
 from .identify import Hint, identify, right_of, score_labels
 from .points import PointReconstructor, Points3D, PointsConfig
-from .rigid import LA, LK, LS, LW, RA, RK, RS, RW, Body
+from .rigid import LA, LEVEL_M, LK, LS, LW, RA, RK, RS, RW, Body
 
 log = logging.getLogger(__name__)
 
@@ -480,20 +480,16 @@ class Labeller:
         wrong way round as often as not, and tracking keeps them so. The shoulders are rigid: a
         shoulder named more than half the tolerance off the shoulder width from the other one,
         while its own wrist's point is within a sixth of it and level with the other shoulder
-        (``_LEVEL_M``), for ``arm_swap_s``, swaps names (and tracks) with that wrist. out (8, 3),
+        (``LEVEL_M``), for ``arm_swap_s``, swaps names (and tracks) with that wrist. out (8, 3),
         assign, arow (8,) in place."""
         body = self._body
-        for i, (s, w, o) in enumerate(((LS, LW, RS), (RS, RW, LS))):
+        for i, (s, w, o) in enumerate(_ARMS):
             fits = assign[s] >= 0 and assign[w] >= 0 and assign[o] >= 0 and \
                 len({int(assign[s]), int(assign[w]), int(assign[o])}) == 3 and \
                 body.width_error(out[s], out[o]) > 0.5 * body.tol and \
-                body.width_error(out[w], out[o]) < body.tol / 6 and abs(float(out[w, 2] - out[o, 2])) <= _LEVEL_M
-            if not fits:
-                self._arm_swap_since[i] = None
-                continue
-            if self._arm_swap_since[i] is None:
-                self._arm_swap_since[i] = t
-            if t - self._arm_swap_since[i] >= self.config.arm_swap_s - 1e-6:
+                body.width_error(out[w], out[o]) < body.tol / 6 and abs(float(out[w, 2] - out[o, 2])) <= LEVEL_M
+            since = self._arm_swap_since[i] = _held_since(self._arm_swap_since[i], fits, t)
+            if since is not None and t - since >= self.config.arm_swap_s - 1e-6:
                 log.debug("t=%.3f s: shoulder %d and its wrist swapped: the wrist's point fits the shoulder width", t, s)
                 self._arm_swap_since[i] = None
                 self._swap([(s, w)], out, assign, arow)
@@ -509,13 +505,10 @@ class Labeller:
         legs' names are swapped back (knee and ankle together). out (8, 3), assign, arow (8,) in place."""
         if assign[LK] < 0 or assign[RK] < 0 or assign[LK] == assign[RK]:
             return
-        if float((out[RK] - out[LK]) @ right) >= -self.config.crossed_m:
-            self._knees_crossed_since = None
-            return
-        if self._knees_crossed_since is None:
-            self._knees_crossed_since = t
-        if t - self._knees_crossed_since >= self.config.knees_crossed_s:
-            log.debug("t=%.3f s: knees crossed for %.2f s: the legs' names swapped", t, t - self._knees_crossed_since)
+        crossed = float((out[RK] - out[LK]) @ right) < -self.config.crossed_m
+        since = self._knees_crossed_since = _held_since(self._knees_crossed_since, crossed, t)
+        if since is not None and t - since >= self.config.knees_crossed_s:
+            log.debug("t=%.3f s: knees crossed for %.2f s: the legs' names swapped", t, t - since)
             self._knees_crossed_since = None
             self._swap([(LK, RK), (LA, RA)], out, assign, arow)
 
@@ -536,7 +529,7 @@ class Labeller:
         its own shoulder. out (8, 3), assign (8,) in place."""
         cfg = self.config
         named = np.isfinite(out).all(axis=1)
-        for side, (S, W, O) in enumerate(((LS, LW, RS), (RS, RW, LS))):
+        for side, (S, W, O) in enumerate(_ARMS):
             hist = self._glue[side]
             if not (named[W] and named[O] and not named[S]):
                 hist.clear()
@@ -730,6 +723,14 @@ class Labeller:
                 self._facing, self._t_facing = f, t
 
 
+def _held_since(since: float | None, holds: bool, t: float) -> float | None:
+    """When a condition that holds at time t (s) has held since: ``since`` if it already held,
+    t if it starts now, None when it does not hold."""
+    if not holds:
+        return None
+    return t if since is None else since
+
+
 def _split_shared(out: np.ndarray, assign: np.ndarray, pred: np.ndarray, half: float,
                   right: np.ndarray | None = None) -> None:
     """Markers named to the same (merged) point: place them either side of it, at most ``half``
@@ -753,8 +754,8 @@ def _split_shared(out: np.ndarray, assign: np.ndarray, pred: np.ndarray, half: f
         out[n] = out[n] - off
 
 
-#: m: shoulders are level within this (as identification's tilt allowance)
-_LEVEL_M = 0.06
+#: per side: (its shoulder, its wrist, the other shoulder)
+_ARMS = ((LS, LW, RS), (RS, RW, LS))
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
 
 

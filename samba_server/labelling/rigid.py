@@ -14,12 +14,14 @@ import numpy as np
 
 from samba_common.skeleton import BONE_TYPES, M
 
-__all__ = ["Body", "DEFAULT_LENGTHS", "LS", "RS", "LW", "RW", "LK", "RK", "LA", "RA", "SIDES"]
+__all__ = ["Body", "DEFAULT_LENGTHS", "LEVEL_M", "LS", "RS", "LW", "RW", "LK", "RK", "LA", "RA", "SIDES"]
 
 LS, RS, LW, RW, LK, RK, LA, RA = (M[n] for n in ("left_shoulder", "right_shoulder", "left_wrist", "right_wrist",
                                                  "left_knee", "right_knee", "left_ankle", "right_ankle"))
 #: (shoulder, wrist, knee, ankle) marker indices of the left and right side
 SIDES = ((LS, LW, LK, LA), (RS, RW, RK, RA))
+#: m: the shoulders are level within this (a wrist held at shoulder height is not a shoulder)
+LEVEL_M = 0.06
 _B = {n: i for i, n in enumerate(BONE_TYPES)}
 #: an adult of average build (m), BONE_TYPES order, for before the subject is measured
 DEFAULT_LENGTHS = np.array([0.34, 0.20, 0.50, 0.25, 0.28, 0.26, 0.44, 0.43])
