@@ -88,6 +88,10 @@ def _rot_z(a: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+#: m: a take starting higher than this above its floor gets its T-pose on the floor
+FLOOR_SLACK_M = 0.05
+
+
 def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1.0,
                   transition: float = 0.6, stance: float | str = 0.12, *,
                   pose_at: tuple[float, float] | np.ndarray | None = None, walk_speed: float = 1.0,
@@ -95,8 +99,12 @@ def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1
     """Prepend ``hold`` s of T-pose and a blend into the take.
 
     joints: (F, 13, 3) metres at times t (F,) (uniform at ``fps``). The T-pose uses the
-    first frame's bone lengths and ankle height, and ``stance`` (:func:`stance_offset`). It
-    stands at ``pose_at`` (x, y) m, or where the take starts if None.
+    first frame's bone lengths and ankle height, and ``stance`` (:func:`stance_offset`). A take
+    whose first frame is more than ``FLOOR_SLACK_M`` off the ground (a climb starting on a
+    structure, a jump) has its T-pose on the take's floor (the 2nd percentile of the lower
+    ankle's height): people stand on the floor for the standard pose, and one 1.7 m up in the
+    air had the upper body out of every camera's view. It stands at ``pose_at`` (x, y) m, or
+    where the take starts if None.
 
     The blend moves the hips along the straight line from the pose to the first frame's
     position, turns the body about the vertical axis (shortest way) and moves the joints
@@ -107,7 +115,11 @@ def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1
     first = joints[0]
     lengths = bone_lengths(first[None])[0]
     hip = 0.5 * (first[J["left_hip"]] + first[J["right_hip"]])
-    ankle_z = float(min(first[J["left_ankle"], 2], first[J["right_ankle"], 2]))
+    low = np.nanmin(joints[:, [J["left_ankle"], J["right_ankle"]], 2], axis=1)  # (F,)
+    ankle_z = float(low[0])
+    floor = float(np.nanpercentile(low, 2))
+    if ankle_z > floor + FLOOR_SLACK_M:
+        ankle_z = floor
     place = hip[:2] if pose_at is None else np.asarray(pose_at, float).reshape(2)
     tp = tpose(lengths, place, ankle_z, stance)
     n_hold = int(round(hold * fps))

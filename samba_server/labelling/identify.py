@@ -150,7 +150,10 @@ def _shoulders(X: np.ndarray, L: int, R: int, trust: np.ndarray, body: Body, hin
     """(score, facing (2,)) of points L, R as the left and right shoulders, or None when they
     cannot be."""
     zs = X[:, 2]
-    if min(zs[L], zs[R]) < 0.6 or abs(zs[L] - zs[R]) > 0.35 or body.width_error(X[L], X[R]) > body.tol:
+    # no higher than a jump lifts them (points up there are the knees of a subject standing on
+    # something, the upper body out of view)
+    if min(zs[L], zs[R]) < 0.6 or max(zs[L], zs[R]) > body.top or abs(zs[L] - zs[R]) > 0.35 \
+            or body.width_error(X[L], X[R]) > body.tol:
         return None
     f = _unit2(np.cross(_UP, X[R] - X[L]))
     if f is None:

@@ -22,6 +22,12 @@ LS, RS, LW, RW, LK, RK, LA, RA = (M[n] for n in ("left_shoulder", "right_shoulde
 SIDES = ((LS, LW, LK, LA), (RS, RW, RK, RA))
 #: m: the shoulders are level within this (a wrist held at shoulder height is not a shoulder)
 LEVEL_M = 0.06
+#: m: identification names shoulders at most this far above their standing height, plus the
+#: tolerance (jumps in the CMU clips lift them up to 0.50 m; a subject sitting or standing on a
+#: climbing frame, 0.77-0.94 m, keeps the names tracking gave, but is not identified up there)
+RISE_M = 0.6
+#: m: the ankle joint's height above the floor standing
+ANKLE_Z = 0.08
 _B = {n: i for i, n in enumerate(BONE_TYPES)}
 #: an adult of average build (m), BONE_TYPES order, for before the subject is measured
 DEFAULT_LENGTHS = np.array([0.34, 0.20, 0.50, 0.25, 0.28, 0.26, 0.44, 0.43])
@@ -38,6 +44,7 @@ class Body:
     shoulder_width: float
     reach: float
     trunk: float  #: shoulder to knee of the same side, at most (torso + thigh)
+    top: float  #: the highest a shoulder goes above the floor (standing height + RISE_M + tol)
     tol: float
     measured: bool
 
@@ -55,6 +62,7 @@ class Body:
                     reach=float(ln[_B["upper_arm"]] + ln[_B["forearm"]]),
                     trunk=float(np.hypot(ln[_B["torso"]], 0.5 * (ln[_B["shoulder_width"]] - ln[_B["hip_width"]]))
                                 + ln[_B["thigh"]]),
+                    top=float(ANKLE_Z + ln[_B["shin"]] + ln[_B["thigh"]] + ln[_B["torso"]] + RISE_M + tol),
                     tol=float(tol), measured=measured)
 
     def shin_error(self, knee: np.ndarray, ankle: np.ndarray) -> float:

@@ -119,6 +119,25 @@ def test_pose_at_none_stands_where_the_clip_starts(tmp_path) -> None:
 
 
 @needs_walk
+def test_a_take_starting_up_on_a_structure_has_its_standard_pose_on_the_floor() -> None:
+    """A climb that starts 1.7 m up (CMU 001_14) put the standard pose in mid-air, the upper
+    body above every camera: the pose stands on the take's floor and the lead-in climbs."""
+    joints, t, _ = load_motion(WALK)
+    ankles = [J["left_ankle"], J["right_ankle"]]
+    floor = float(np.percentile(joints[:, ankles, 2].min(axis=1), 2))
+    lifted = joints.copy()
+    lifted[:30, :, 2] += 1.7 * np.linspace(1.0, 0.0, 30)[:, None]  # steps down off a 1.7 m block
+    cfg = SimConfig()
+    j, _, n = prepare_motion(lifted, t, cfg)
+    assert j[0, ankles, 2].min() == pytest.approx(floor, abs=0.01)
+    speed = np.linalg.norm(np.diff(j[: n + 1, list(MARKER_JOINT)], axis=0), axis=2) * cfg.fps
+    assert speed.max() < 3.0
+    # a take that starts on its floor keeps the first frame's ankle height
+    j0, _, _ = prepare_motion(joints, t, cfg)
+    assert j0[0, ankles, 2].min() == pytest.approx(joints[0, ankles, 2].min(), abs=1e-9)
+
+
+@needs_walk
 def test_walk_take_on_disk_keeps_n_tpose(tmp_path) -> None:
     take = make_take(tmp_path, WALK, rig=2, seconds=1.0, config=SimConfig(pose_at=(1.0, 1.0)))
     truth = np.load(tmp_path / "truth2d.npz")

@@ -682,3 +682,20 @@ def test_an_audit_does_not_move_a_crouching_subjects_tracked_names(move_margin):
         assert got is not None and got[1].mode == "identified"
         moved = np.isfinite(tracked).all(axis=1) & (np.linalg.norm(np.nan_to_num(got[0] - tracked), axis=1) > 0.05)
         assert moved.sum() >= 2
+
+
+def test_legs_of_a_subject_up_on_a_structure_are_not_named_as_the_upper_body():
+    """A subject standing 1.7 m up (a climbing frame), head and arms above every camera: the
+    four leg markers a shoulder width apart at shoulder height of a standing subject were named
+    shoulders and wrists, a confidently wrong pose. Shoulders never rise more than a jump above
+    their standing height, so nothing is named instead of the upper body."""
+    rig = default_rig(4)
+    pose = tpose(DEFAULT_LENGTHS, stance=0.14)[list(MARKER_JOINT)]  # the knees a shoulder width apart
+    high = pose + [0.0, 0.0, 1.7]
+    high[:4] = np.nan  # shoulders and wrists out of view
+    rng = np.random.default_rng(3)
+    labeller = Labeller(rig)
+    labeller.set_lengths(DEFAULT_LENGTHS)  # measured from the standard pose on the floor
+    named = _run(labeller, rig, np.repeat(high[None], 20, axis=0), rng)
+    wrong = np.isfinite(named).all(axis=2) & ~_right(named, high[None])
+    assert not wrong.any(), named[-1] - high
