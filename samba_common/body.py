@@ -144,10 +144,21 @@ def standard_dirs() -> np.ndarray:
 STANDARD_R = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]]).T
 
 
-def standard_pose(lengths: np.ndarray, xy: tuple[float, float] = (0.0, 0.0), ankle_height: float = 0.08) -> np.ndarray:
+#: m: the ankle joint's height above the floor, standing
+ANKLE_HEIGHT = 0.08
+
+
+def shoulder_height(lengths: np.ndarray, ankle_height: float = ANKLE_HEIGHT) -> float:
+    """Height (m above the floor) of the shoulders standing straight, for bone lengths (8,)."""
+    lengths = np.asarray(lengths, dtype=float)
+    return float(ankle_height + lengths[L["shin"]] + lengths[L["thigh"]] + lengths[L["torso"]])
+
+
+def standard_pose(lengths: np.ndarray, xy: tuple[float, float] = (0.0, 0.0),
+                  ankle_height: float = ANKLE_HEIGHT) -> np.ndarray:
     """Joints (13, 3) of the standard pose (FORMATS.md) for bone lengths (8,), standing at ``xy``."""
     lengths = np.asarray(lengths, dtype=float)
-    h = ankle_height + lengths[L["shin"]] + lengths[L["thigh"]] + lengths[L["torso"]]
+    h = shoulder_height(lengths, ankle_height)
     return fk(np.array([xy[0], xy[1], h]), STANDARD_R, standard_dirs(), lengths)
 
 
@@ -163,7 +174,7 @@ def prepend_standard_pose(joints: np.ndarray, fps: float, seconds: float = 1.0, 
     origin, R, dirs = decompose(joints)
     take = fk(origin, R, dirs, lens)
     floor = float(np.nanmin(take[..., 2]))
-    stand = standard_pose(lens, (origin[0, 0], origin[0, 1]), ankle_height=max(floor, 0.0) if floor > 0 else 0.08)
+    stand = standard_pose(lens, (origin[0, 0], origin[0, 1]), ankle_height=max(floor, 0.0) if floor > 0 else ANKLE_HEIGHT)
     n_std, n_blend = int(round(seconds * fps)), int(round(blend * fps))
     s_origin, _s_R, s_dirs = decompose(stand[None])
     out = [np.repeat(stand[None], n_std, axis=0)]

@@ -287,16 +287,18 @@ def load_bvh(path: str | os.PathLike, mapping: BvhMapping | str | os.PathLike | 
     return BvhTake(pts, t, fps, chosen.name, str(p))
 
 
-def put_on_floor(joints: np.ndarray, ankle_height: float = 0.08) -> np.ndarray:
-    """Shift a take vertically so its lowest ankles stand ``ankle_height`` m above z = 0.
-
-    joints: (F, 13, 3) metres. Uses the 2nd percentile of the lower ankle, so a few glitchy
-    frames do not lift the whole take.
-    """
+def floor_ankle_height(joints: np.ndarray) -> float:
+    """Height (m) of a take's ankles on its floor: the 2nd percentile over frames of the lower
+    ankle (joints (F, 13, 3)), so a few glitchy frames do not count."""
     ankles = joints[:, [J["left_ankle"], J["right_ankle"]], 2]
-    low = np.nanpercentile(np.nanmin(ankles, axis=1), 2)
+    return float(np.nanpercentile(np.nanmin(ankles, axis=1), 2))
+
+
+def put_on_floor(joints: np.ndarray, ankle_height: float = 0.08) -> np.ndarray:
+    """Shift a take vertically so its lowest ankles (:func:`floor_ankle_height`) stand
+    ``ankle_height`` m above z = 0. joints: (F, 13, 3) metres."""
     out = joints.copy()
-    out[..., 2] += ankle_height - low
+    out[..., 2] += ankle_height - floor_ankle_height(joints)
     return out
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from samba_common.body import bone_lengths
+from samba_common.bvh import floor_ankle_height
 from samba_common.skeleton import BONE_TYPES, J, N_JOINTS
 
 _L = {name: i for i, name in enumerate(BONE_TYPES)}
@@ -101,10 +102,10 @@ def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1
     joints: (F, 13, 3) metres at times t (F,) (uniform at ``fps``). The T-pose uses the
     first frame's bone lengths and ankle height, and ``stance`` (:func:`stance_offset`). A take
     whose first frame is more than ``FLOOR_SLACK_M`` off the ground (a climb starting on a
-    structure, a jump) has its T-pose on the take's floor (the 2nd percentile of the lower
-    ankle's height): people stand on the floor for the standard pose, and one 1.7 m up in the
-    air had the upper body out of every camera's view. It stands at ``pose_at`` (x, y) m, or
-    where the take starts if None.
+    structure, a jump) has its T-pose on the take's floor
+    (:func:`~samba_common.bvh.floor_ankle_height`): people stand on the floor for the standard
+    pose, and one 1.7 m up in the air had the upper body out of every camera's view. It stands
+    at ``pose_at`` (x, y) m, or where the take starts if None.
 
     The blend moves the hips along the straight line from the pose to the first frame's
     position, turns the body about the vertical axis (shortest way) and moves the joints
@@ -115,9 +116,8 @@ def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1
     first = joints[0]
     lengths = bone_lengths(first[None])[0]
     hip = 0.5 * (first[J["left_hip"]] + first[J["right_hip"]])
-    low = np.nanmin(joints[:, [J["left_ankle"], J["right_ankle"]], 2], axis=1)  # (F,)
-    ankle_z = float(low[0])
-    floor = float(np.nanpercentile(low, 2))
+    ankle_z = float(min(first[J["left_ankle"], 2], first[J["right_ankle"], 2]))
+    floor = floor_ankle_height(joints)
     if ankle_z > floor + FLOOR_SLACK_M:
         ankle_z = floor
     place = hip[:2] if pose_at is None else np.asarray(pose_at, float).reshape(2)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from samba_common.body import shoulder_height
 from samba_common.skeleton import BONE_TYPES, M
 
 __all__ = ["Body", "DEFAULT_LENGTHS", "LEVEL_M", "LS", "RS", "LW", "RW", "LK", "RK", "LA", "RA", "SIDES"]
@@ -26,8 +27,6 @@ LEVEL_M = 0.06
 #: tolerance (jumps in the CMU clips lift them up to 0.50 m; a subject sitting or standing on a
 #: climbing frame, 0.77-0.94 m, keeps the names tracking gave, but is not identified up there)
 RISE_M = 0.6
-#: m: the ankle joint's height above the floor standing
-ANKLE_Z = 0.08
 _B = {n: i for i, n in enumerate(BONE_TYPES)}
 #: an adult of average build (m), BONE_TYPES order, for before the subject is measured
 DEFAULT_LENGTHS = np.array([0.34, 0.20, 0.50, 0.25, 0.28, 0.26, 0.44, 0.43])
@@ -62,7 +61,7 @@ class Body:
                     reach=float(ln[_B["upper_arm"]] + ln[_B["forearm"]]),
                     trunk=float(np.hypot(ln[_B["torso"]], 0.5 * (ln[_B["shoulder_width"]] - ln[_B["hip_width"]]))
                                 + ln[_B["thigh"]]),
-                    top=float(ANKLE_Z + ln[_B["shin"]] + ln[_B["thigh"]] + ln[_B["torso"]] + RISE_M + tol),
+                    top=shoulder_height(ln) + RISE_M + float(tol),
                     tol=float(tol), measured=measured)
 
     def shin_error(self, knee: np.ndarray, ankle: np.ndarray) -> float:
