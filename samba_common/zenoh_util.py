@@ -6,6 +6,7 @@ Key expressions (``{session}`` and ``{id}`` may be ``*`` in subscriptions)::
     samba/{session}/mote/{id}           liveliness token of a running mote
     samba/{session}/mote/{id}/status    JSON MoteStatus, about 1 Hz
     samba/{session}/calibration         queryable served by the server: calibration.toml bytes
+    samba/{session}/replay              queryable served by the server: JSON progress of a replay
     samba/{session}/pose                binary pose packets
     samba/{session}/pose/json           JSON pose packets
 
@@ -54,6 +55,11 @@ def status_key(session: str, mote_id: str) -> str:
 def calibration_key(session: str) -> str:
     """Calibration queryable ``samba/{session}/calibration``."""
     return f"samba/{_chunk(session, 'session')}/calibration"
+
+
+def replay_status_key(session: str) -> str:
+    """Replay progress queryable ``samba/{session}/replay`` (JSON, see samba_server.replay)."""
+    return f"samba/{_chunk(session, 'session')}/replay"
 
 
 def pose_key(session: str) -> str:

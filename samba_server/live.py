@@ -4,12 +4,15 @@
   packets republished by ``samba-replay`` carry their recorded arrival, see :class:`ReplayClock`)
 - liveliness subscriber ``samba/{session}/mote/*`` (history on) -> joins/leaves, logged
 - queryable ``samba/{session}/calibration`` -> the calibration.toml bytes
+- queryable ``samba/{session}/replay`` -> JSON progress of a ``samba-replay --connect`` run:
+  ``{"run": id, "received": packets of that run, "backlog": items not yet processed}``
 - publishers ``samba/{session}/pose`` (binary) and ``samba/{session}/pose/json``
 - a processing thread running :meth:`Server.run`
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 
@@ -53,6 +56,7 @@ class LiveServer:
             z.declare_subscriber(zk.markers_key(s, "*"), self._on_markers),
             z.liveliness().declare_subscriber(zk.liveliness_key(s, "*"), self._on_liveliness, history=True),
             z.declare_queryable(zk.calibration_key(s), self._on_query),
+            z.declare_queryable(zk.replay_status_key(s), self._on_replay_query),
         ]
         self._thread = threading.Thread(target=self.server.run, args=(self._stop,), name="samba-server", daemon=True)
         self._thread.start()
@@ -73,7 +77,9 @@ class LiveServer:
             if replaying != self._replaying:
                 self._replaying = replaying
                 self.server.skip_seqs = set() if replaying else None
-            self.server.ingest(mote, sample.payload.to_bytes(), arrival_ns=arrival)
+                self.server.idle_release = not replaying
+            if self.server.ingest(mote, sample.payload.to_bytes(), arrival_ns=arrival) and replaying:
+                self._replay_clock.taken_in()
         except Exception:  # pragma: no cover - defensive: a callback must not die
             log.exception("ingest failed")
 
@@ -97,6 +103,13 @@ class LiveServer:
             query.reply(query.key_expr, self.server.calibration_toml)
         except Exception:  # pragma: no cover
             log.exception("calibration query failed")
+
+    def _on_replay_query(self, query) -> None:
+        try:
+            status = {**self._replay_clock.progress(), "backlog": self.server.backlog}
+            query.reply(query.key_expr, json.dumps(status))
+        except Exception:  # pragma: no cover
+            log.exception("replay status query failed")
 
     def _publish(self, msg: PoseMessage) -> None:
         self._pub.put(encode_pose(msg))

@@ -105,6 +105,12 @@ class ReplayClock:
         self._lock = threading.Lock()
         self._run: int | None = None
         self._shift = 0
+        self._received = 0  # packets of the current run
+
+    def progress(self) -> dict:
+        """``{"run": id or None, "received": packets of that run taken in}`` (see :meth:`Player.play`)."""
+        with self._lock:
+            return {"run": self._run, "received": self._received}
 
     def arrival_ns(self, attachment: bytes | None, now_ns: int, last_arrival_ns: int) -> int | None:
         """The arrival stamp for a packet with ``attachment`` received at ``now_ns``, or None
@@ -116,9 +122,14 @@ class ReplayClock:
             return None
         with self._lock:
             if run != self._run:
-                self._run = run
+                self._run, self._received = run, 0
                 self._shift = max(now_ns, last_arrival_ns + 1) - recorded
             return recorded + self._shift
+
+    def taken_in(self) -> None:
+        """Count one packet of the current run as taken in by the server (queued, not dropped)."""
+        with self._lock:
+            self._received += 1
 
 
 class Player:
@@ -136,6 +147,8 @@ class Player:
         self.cfg = zk.make_config(connect=connect, listen=listen)
         self.speed = speed
         self.sent = 0
+        #: packets the server says it took in of this run (its replay status), None = unknown
+        self.taken_in: int | None = None
 
     def play(self, stop=None, wait_match: float = 5.0, max_join_gap: float = 0.6, quiet_s: float = 0.5,
              drain_s: float = 60.0) -> int:
@@ -153,7 +166,10 @@ class Player:
         run_id = int.from_bytes(os.urandom(8), "little")
         motes = sorted({m.mote_id for m in TakeReader(self.path) if m.mote_id is not None})
         with zenoh.open(self.cfg) as z:
-            pubs = {mote: z.declare_publisher(zk.markers_key(self.session_name, mote)) for mote in motes}
+            # BLOCK: a replay loses no packet when it outruns the server (DROP, the default, is
+            # for live motes, whose stale packets are worth nothing)
+            pubs = {mote: z.declare_publisher(zk.markers_key(self.session_name, mote),
+                                              congestion_control=zenoh.CongestionControl.BLOCK) for mote in motes}
             deadline = time.monotonic() + wait_match
             while not all(p.matching_status.matching for p in pubs.values()) and time.monotonic() < deadline:
                 time.sleep(0.01)
@@ -195,15 +211,42 @@ class Player:
                 self.sent += 1
             t_last = time.monotonic()
             # Zenoh delivers data and liveliness on separate paths: leaving at once could reach the
-            # server before the last packets (at --speed max they queue up), so wait until the
-            # server has published no pose for quiet_s (at most drain_s)
-            end = time.monotonic() + drain_s
-            while time.monotonic() < end and time.monotonic() - max(last_pose[0], t_last) < quiet_s:
-                time.sleep(0.05)
+            # server before the last packets (at --speed max they queue up), so wait until it has
+            # taken in and processed them all (at most drain_s)
+            self._drain(z, run_id, lambda: max(last_pose[0], t_last), quiet_s, drain_s)
             pose_sub.undeclare()
             for tok in tokens.values():
                 tok.undeclare()
         return self.sent
+
+    def _drain(self, z, run_id: int, last_activity: Callable[[], float], quiet_s: float, drain_s: float) -> None:
+        """Wait until the server says (its replay status queryable) that it took in all
+        ``self.sent`` packets of this run and processed them; a server without the queryable
+        (an older one) is waited for until it published no pose for ``quiet_s``. At most
+        ``drain_s`` s; a server still short of packets then is reported."""
+        end = time.monotonic() + drain_s
+        key = zk.replay_status_key(self.session_name)
+        status, seen, changed = None, None, time.monotonic()
+        while time.monotonic() < end:
+            status = _query_json(z, key, timeout=min(2.0, max(end - time.monotonic(), 0.1)))
+            if status is None:
+                break
+            got = status.get("received", -1) if status.get("run") == run_id else -1
+            if got >= 0:
+                self.taken_in = got
+            if got >= self.sent and status.get("backlog") == 0:
+                return
+            if got != seen or status.get("backlog") != 0:
+                seen, changed = got, time.monotonic()
+            elif time.monotonic() - changed > max(4 * quiet_s, 2.0):
+                break  # idle, and nothing more comes in: packets were lost on the way
+            time.sleep(0.02)
+        if status is not None:
+            log.warning("the server took in %s of the %d packets sent: the rest was lost on the way",
+                        self.taken_in or 0, self.sent)
+            return
+        while time.monotonic() < end and time.monotonic() - last_activity() < quiet_s:
+            time.sleep(0.05)
 
     def _event(self, z, m, tokens: dict) -> tuple[int, float] | None:
         """Declare/undeclare the token of a recorded join/leave; returns (recorded, wall) of a join."""
@@ -221,3 +264,17 @@ class Player:
         if not joined and mote in tokens and self.speed:
             tokens.pop(mote).undeclare()
         return None
+
+
+def _query_json(z, key: str, timeout: float) -> dict | None:
+    """The first JSON reply of a Zenoh query on ``key``; ``{}`` when the query timed out or
+    failed (a busy server: ask again); None when nobody serves ``key`` (the query ends at once)."""
+    try:
+        for reply in z.get(key, timeout=timeout):
+            if reply.ok is not None:
+                return json.loads(reply.ok.payload.to_bytes())
+            return {}  # e.g. "Timeout"
+    except Exception as exc:
+        log.debug("query %s failed: %s", key, exc)
+        return {}
+    return None

@@ -118,6 +118,12 @@ class Server:
         #: replay: pose seqs whose solve the live server skipped (recorded FLAG_SOLVE_SKIPPED);
         #: when set, it replaces the wall-clock lag test so a replay takes the same decisions
         self.skip_seqs: set[int] | None = None
+        #: live motes: when the queue runs dry, the sync clock moves to the wall clock (frames
+        #: waiting for a dead mote are released). A replay stamped with its recorded arrivals
+        #: turns this off: its frames are released by its own stamps, leaves and ``finish``, as
+        #: in an in-process replay, never by a wall clock that a slow server lets overtake them
+        self.idle_release = True
+        self._queued = self._handled = 0  # items (packets, joins, leaves) queued and handled
         if recorder is not None:
             recorder.write_calibration(self.calibration_toml, clock())
 
@@ -164,6 +170,7 @@ class Server:
             except queue.Full:
                 self.stats.queue_overflow += 1
                 return False
+            self._queued += 1
             return True
 
     def mote_event(self, mote_id: str, joined: bool, t_ns: int | None = None) -> None:
@@ -174,13 +181,21 @@ class Server:
                 ev = {"mote_id": mote_id, "event": "join" if joined else "leave", "t_ns": t}
                 self.recorder.write_event(json.dumps(ev).encode(), t)
             self._queue.put(("join" if joined else "leave", mote_id, b"", t))
+            self._queued += 1
+
+    @property
+    def backlog(self) -> int:
+        """Items (packets, joins, leaves) taken in and not yet fully handled (any thread)."""
+        with self._lock:
+            return self._queued - self._handled
 
     # ------------------------------------------------------------------ processing
     def process_pending(self, timeout: float | None = None, stop: threading.Event | None = None) -> list[PoseMessage]:
         """Handle every queued item in order (waiting up to ``timeout`` s for the first).
 
-        When the queue is empty, advance the sync clock to now so that frames waiting for a
-        dead mote are released (only packets stamped later than now can still arrive).
+        When the queue is empty (and ``idle_release``), advance the sync clock to now so that
+        frames waiting for a dead mote are released (only packets stamped later than now can
+        still arrive).
         """
         out: list[PoseMessage] = []
         try:
@@ -188,14 +203,17 @@ class Server:
         except queue.Empty:
             item = None
         while item is not None:
-            out += self._handle(item)
+            try:
+                out += self._handle(item)
+            finally:
+                self._handled += 1
             if stop is not None and stop.is_set():
                 return out
             try:
                 item = self._queue.get_nowait()
             except queue.Empty:
                 item = None
-        if timeout:
+        if timeout and self.idle_release:
             with self._lock:
                 if self._queue.empty():
                     now = self.clock()

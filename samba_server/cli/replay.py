@@ -71,6 +71,9 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             stop.set()
             sent = player.sent
+        if player.taken_in is not None and player.taken_in < sent:
+            print(f"samba-replay: {sent} packets published, the server took in {player.taken_in}", file=sys.stderr)
+            return 1
         print(f"samba-replay: {sent} packets published", file=sys.stderr)
         return 0
     except (OSError, ValueError, ConfigError, CalibrationError) as exc:

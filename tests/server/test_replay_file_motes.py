@@ -100,6 +100,7 @@ def test_file_motes_live_replay_and_max_speed(tmp_path, file_take) -> None:
     with LiveServer(server2, session="fm2", listen=[endpoint2]):
         sent = Player(take_path, "fm2", connect=[endpoint2], speed=None).play()
     assert sent == sum(s.packets_sent for s in stats)
+    assert server.idle_release and not server2.idle_release  # live motes vs a replay (see below)
     ref = _replay_server(take_path, configs)
     import samba_server.replay as replay_mod
 
@@ -117,6 +118,108 @@ def test_file_motes_live_replay_and_max_speed(tmp_path, file_take) -> None:
     ref.finish()
     _same(ref.poses, server2.poses)
     assert sum(p.solved for p in server2.poses) >= sum(p.solved for p in live)
+
+
+@pytest.mark.parametrize("replaying", [False, True])
+def test_a_server_behind_a_replay_keeps_its_frames_whole(replaying: bool) -> None:
+    """A server that falls behind a replay at full speed (its clock past the recorded stamps)
+    must not release a frame by the wall clock while the frame's last packet is on its way:
+    it would solve the frame from one view and drop the other as late, unlike the recording
+    (CI once lost the last frame's second view so). Live motes keep the wall clock: a frame
+    waiting for a dead mote is released when the queue runs dry."""
+    from samba_common.calib import default_rig
+    from samba_common.wire import encode_packet
+    from samba_server.simmotes import make_packet
+
+    t0, period = 1_700_000_000_000_000_000, 16_666_667
+    clock = [t0]
+    server = Server(default_rig(2), clock=lambda: clock[0])
+    server.idle_release = not replaying
+    rng = np.random.default_rng(0)
+    uv, vis = np.full((8, 2), 50.0), np.ones(8, bool)
+
+    def put(cam: str, k: int) -> None:
+        pkt = make_packet(cam, k, t0 + k * period, uv, vis, (160, 120), rng, 0.0)
+        server.ingest(cam, encode_packet(pkt), arrival_ns=t0 + k * period + 2_000_000)
+
+    for k in range(3):
+        put("cam0", k)
+        put("cam1", k)
+    server.process_pending()
+    n, incomplete, late = len(server.poses), server.sync.frames_incomplete, server.sync.motes["cam1"].late
+    put("cam0", 3)
+    clock[0] = t0 + 10_000_000_000  # the server is 10 s behind the stamps; the queue runs dry
+    server.process_pending(timeout=0.001)
+    put("cam1", 3)
+    server.process_pending()
+    server.finish()
+    assert len(server.poses) == n + 1
+    if replaying:  # frame 3 waited for its second view, as in an in-process replay
+        assert (server.sync.frames_incomplete, server.sync.motes["cam1"].late) == (incomplete, late)
+    else:  # live: released at once without cam1, whose packet then came too late
+        assert (server.sync.frames_incomplete, server.sync.motes["cam1"].late) == (incomplete + 1, late + 1)
+
+
+def _packet_take(path, n_frames: int = 120) -> int:
+    """A recorded 2-mote take of ``n_frames`` frames at 60 fps; returns its packet count."""
+    from samba_common.calib import default_rig
+    from samba_common.wire import encode_packet
+    from samba_server.record import Recorder
+    from samba_server.simmotes import make_packet
+
+    rig = default_rig(2)
+    rng = np.random.default_rng(0)
+    uv, vis = np.full((8, 2), 50.0), np.ones(8, bool)
+    with Recorder(path, calibration_toml=rig.dumps().encode()) as rec:
+        for k in range(n_frames):
+            for name in rig.names:
+                t = 1_000_000_000 + k * 16_666_667
+                rec.write_packet(name, encode_packet(make_packet(name, k, t, uv, vis, (160, 120), rng, 0.05)),
+                                 t + 500_000)
+    return n_frames * len(rig.names)
+
+
+def test_replay_waits_for_a_stalled_server_and_reports_losses(tmp_path, capsys) -> None:
+    """samba-replay --connect --speed max leaves only once the server has taken in and processed
+    every packet, even when the server stalls (a recorder blocked on the disk: its Zenoh
+    callback stops taking packets in, its poses stop for longer than the player's quiet wait).
+    A server that loses packets makes samba-replay say so and exit 1."""
+    from samba_common.calib import default_rig
+    from samba_server.cli.replay import main as replay_main
+
+    path = tmp_path / "take.mcap"
+    n = _packet_take(path)
+    server = Server(default_rig(2))
+    ingest, calls = server.ingest, [0]
+
+    def stalling(*a, **kw) -> bool:
+        calls[0] += 1
+        if calls[0] == 50:
+            time.sleep(1.5)
+        return ingest(*a, **kw)
+
+    server.ingest = stalling
+    endpoint = free_endpoint()
+    with LiveServer(server, session="st", listen=[endpoint]):
+        player = Player(path, "st", connect=[endpoint], speed=None)
+        assert player.play() == n
+        assert calls[0] == n and server.backlog == 0 and player.taken_in == n
+    assert len(server.poses) == n // 2
+
+    lossy = Server(default_rig(2))
+    lossy_ingest, seen = lossy.ingest, [0]
+
+    def losing(*a, **kw) -> bool:  # every 10th packet dropped, as by a full queue
+        seen[0] += 1
+        return seen[0] % 10 != 0 and lossy_ingest(*a, **kw)
+
+    lossy.ingest = losing
+    endpoint = free_endpoint()
+    t0 = time.monotonic()
+    with LiveServer(lossy, session="lo", listen=[endpoint]):
+        code = replay_main([str(path), "--connect", endpoint, "--session", "lo", "--speed", "max"])
+    assert code == 1 and time.monotonic() - t0 < 20
+    assert f"{n} packets published, the server took in {n - n // 10}" in capsys.readouterr().err
 
 
 def test_missing_video_file_fails_at_once(tmp_path) -> None:
