@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .body import ANKLE_HEIGHT
 from .config import ConfigError, read_toml, tomllib
 from .skeleton import JOINT_NAMES, J
 
@@ -294,7 +295,7 @@ def floor_ankle_height(joints: np.ndarray) -> float:
     return float(np.nanpercentile(np.nanmin(ankles, axis=1), 2))
 
 
-def put_on_floor(joints: np.ndarray, ankle_height: float = 0.08) -> np.ndarray:
+def put_on_floor(joints: np.ndarray, ankle_height: float = ANKLE_HEIGHT) -> np.ndarray:
     """Shift a take vertically so its lowest ankles (:func:`floor_ankle_height`) stand
     ``ankle_height`` m above z = 0. joints: (F, 13, 3) metres."""
     out = joints.copy()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from samba_common.body import bone_lengths
+from samba_common.body import ANKLE_HEIGHT, bone_lengths
 from samba_common.bvh import floor_ankle_height
 from samba_common.skeleton import BONE_TYPES, J, N_JOINTS
 
@@ -41,7 +41,7 @@ def stance_offset(stance: float | str, hip_width: float) -> float:
     return float(stance)
 
 
-def tpose(lengths: np.ndarray, hip_xy: np.ndarray = (0.0, 0.0), ankle_z: float = 0.08,
+def tpose(lengths: np.ndarray, hip_xy: np.ndarray = (0.0, 0.0), ankle_z: float = ANKLE_HEIGHT,
           stance: float | str = 0.12) -> np.ndarray:
     """T-pose joints (13, 3): lengths (8,) in BONE_TYPES order (metres), hip midpoint at
     ``hip_xy`` (2,), ankles at height ``ankle_z``; facing +Y, right hand toward +X.

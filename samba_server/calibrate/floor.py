@@ -18,6 +18,7 @@ import logging
 
 import numpy as np
 
+from samba_common.body import ANKLE_HEIGHT
 from samba_common.calib import CameraRig
 from samba_common.skeleton import M
 from samba_server.calibrate.bundle import transform_rig
@@ -118,7 +119,7 @@ def lframe_transform(points: np.ndarray, height: float = 0.0,
     return R, mm - R @ pm
 
 
-def standard_pose_transform(markers: np.ndarray, ankle_height: float = 0.08) -> tuple[np.ndarray, np.ndarray]:
+def standard_pose_transform(markers: np.ndarray, ankle_height: float = ANKLE_HEIGHT) -> tuple[np.ndarray, np.ndarray]:
     """World change from labelled markers (F, 8, 3) of a subject standing in the standard pose
     (use the first second of a take): the median over frames is used."""
     m = np.nanmedian(np.asarray(markers, float), axis=0)

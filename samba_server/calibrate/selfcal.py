@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from samba_common.body import ANKLE_HEIGHT
 from samba_common.calib import Camera, CameraRig
 from samba_common.skeleton import M
 from samba_server.calibrate.bundle import Observations, bundle_adjust, camera_from_pose, transform_rig
@@ -119,7 +120,7 @@ def self_calibrate(
     repair: list[str] | None = None,
     fps: float = 60.0,
     max_frames: int = 150,
-    ankle_height: float = 0.08,
+    ankle_height: float = ANKLE_HEIGHT,
 ) -> tuple[CameraRig, SelfCalReport]:
     """Calibrate extrinsics from labelled markers uv (F, C, 8, 2) raw px (NaN = unseen).
 

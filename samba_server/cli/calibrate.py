@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from samba_common.body import ANKLE_HEIGHT
 from samba_common.calib import CalibrationError, CameraRig, default_rig
 
 log = logging.getLogger("samba_server.calibrate")
@@ -264,7 +265,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--standard-pose", action="store_true", help="use a subject standing in the standard pose")
     s.add_argument("--seconds", type=float, default=1.0, help="standard pose: length at the start of the take")
     s.add_argument("--fps", type=float, default=60.0)
-    s.add_argument("--ankle-height", type=float, default=0.08, help="ankle marker height above the floor (m)")
+    s.add_argument("--ankle-height", type=float, default=ANKLE_HEIGHT, help="ankle marker height above the floor (m)")
     lframe_opts(s)
     s.set_defaults(func=cmd_floor)
 
