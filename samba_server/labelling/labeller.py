@@ -180,9 +180,13 @@ class Labeller:
         self._skel = []
         self._facing = None
         self._t_lost = self._t_ambiguous = None
+        self._reset_timers()
+        self._free_hist = []
+
+    def _reset_timers(self) -> None:
+        """Forget what the swap rules saw held over time: it was about the names before."""
         self._knees_crossed_since = None
         self._arm_swap_since = [None, None]
-        self._free_hist = []
         self._glue = ([], [])
 
     # ------------------------------------------------------------------ per frame
@@ -697,7 +701,7 @@ class Labeller:
         either side of a merged point, whose positions are partly a guess."""
         named = np.isfinite(out).all(axis=1)
         if reset:
-            self._knees_crossed_since = None
+            self._reset_timers()
             self._pos[:] = np.nan
             self._seen[:] = -np.inf
             self._vel[:] = 0.0
