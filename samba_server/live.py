@@ -77,7 +77,6 @@ class LiveServer:
             if replaying != self._replaying:
                 self._replaying = replaying
                 self.server.skip_seqs = set() if replaying else None
-                self.server.idle_release = not replaying
             if self.server.ingest(mote, sample.payload.to_bytes(), arrival_ns=arrival) and replaying:
                 self._replay_clock.taken_in()
         except Exception:  # pragma: no cover - defensive: a callback must not die

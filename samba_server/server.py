@@ -115,14 +115,10 @@ class Server:
         self.packet_listeners: list[Callable] = []
         #: callables(PoseMessage) called with every pose after ``publish``
         self.pose_listeners: list[Callable] = []
-        #: replay: pose seqs whose solve the live server skipped (recorded FLAG_SOLVE_SKIPPED);
-        #: when set, it replaces the wall-clock lag test so a replay takes the same decisions
+        #: replay: pose seqs whose solve the live server skipped (recorded FLAG_SOLVE_SKIPPED).
+        #: When set (a replay), the recording's decisions replace the wall-clock ones: the lag
+        #: test, and the idle release of frames (see :meth:`process_pending`)
         self.skip_seqs: set[int] | None = None
-        #: live motes: when the queue runs dry, the sync clock moves to the wall clock (frames
-        #: waiting for a dead mote are released). A replay stamped with its recorded arrivals
-        #: turns this off: its frames are released by its own stamps, leaves and ``finish``, as
-        #: in an in-process replay, never by a wall clock that a slow server lets overtake them
-        self.idle_release = True
         self._queued = self._handled = 0  # items (packets, joins, leaves) queued and handled
         if recorder is not None:
             recorder.write_calibration(self.calibration_toml, clock())
@@ -193,9 +189,11 @@ class Server:
     def process_pending(self, timeout: float | None = None, stop: threading.Event | None = None) -> list[PoseMessage]:
         """Handle every queued item in order (waiting up to ``timeout`` s for the first).
 
-        When the queue is empty (and ``idle_release``), advance the sync clock to now so that
-        frames waiting for a dead mote are released (only packets stamped later than now can
-        still arrive).
+        When the queue is empty, advance the sync clock to now so that frames waiting for a
+        dead mote are released (only packets stamped later than now can still arrive). Not in
+        a replay (``skip_seqs`` set): its frames are released by their recorded stamps, leaves
+        and ``finish``, as in an in-process replay, never by a wall clock that a server running
+        behind the replay lets overtake them.
         """
         out: list[PoseMessage] = []
         try:
@@ -213,7 +211,7 @@ class Server:
                 item = self._queue.get_nowait()
             except queue.Empty:
                 item = None
-        if timeout and self.idle_release:
+        if timeout and self.skip_seqs is None:
             with self._lock:
                 if self._queue.empty():
                     now = self.clock()
