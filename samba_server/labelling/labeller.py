@@ -24,6 +24,7 @@ live labels exactly.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from dataclasses import dataclass, field
@@ -38,7 +39,7 @@ from ..triangulate import Triangulator
 from .blobs import view_blobs
 from .identify import Hint, identify, right_of, score_labels
 from .points import PointReconstructor, Points3D, PointsConfig
-from .rigid import LA, LEVEL_M, LK, LS, LW, RA, RK, RS, RW, Body
+from .rigid import LA, LEVEL_M, LK, LS, LW, RA, RK, RS, RW, SIDES, Body
 
 log = logging.getLogger(__name__)
 
@@ -59,6 +60,7 @@ class LabelConfig:
     merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
+    recover_doubt_gate_m: float = 0.30  #: ... or a 2-view point one view misses, this far, at its unexplained cost
     wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
     glued_wrist_s: float = 0.3  #: a wrist held a shoulder width from the other shoulder this long, its own shoulder unnamed, is that shoulder
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
@@ -378,14 +380,17 @@ class Labeller:
         about it) would otherwise never be found again.
 
         A point that is surely a marker (>= 3 views, or no view missing it) is a candidate for a
-        marker within ``recover_gate_m`` of its prediction; it, or a 2-view point that one
-        other view misses, is a candidate where the named markers put it: a shoulder a shoulder
-        width from the other along the subject's right, a knee a shin above its ankle, an ankle
-        a shin below its knee. The candidates are assigned optimally; a pair is kept when the
-        best assignment without it costs ``recover_margin_m`` more and the marker's rigid
-        distances hold. assign, arow (8,) in place."""
+        marker within ``recover_gate_m`` of its prediction, a 2-view point that one other view
+        misses (a hand the body hides from a camera) within ``recover_doubt_gate_m`` at the
+        cost ``unexplained_m`` more; either is a candidate where the named markers put it: a
+        shoulder a shoulder width from the other along the subject's right, a knee a shin above
+        its ankle, an ankle a shin below its knee. The candidates are assigned optimally; a pair
+        is kept when the best assignment without it costs ``recover_margin_m`` more and the
+        marker's rigid distances hold. A leg with neither marker named is first looked for as a
+        pair (:meth:`_recover_leg`). assign, arow (8,) in place."""
         cfg = self.config
         body = self._body
+        self._recover_leg(pts, assign, arow, row_pt)
         named = np.full((N_MARKERS, 3), np.nan)
         named[assign >= 0] = pts.X[assign[assign >= 0]]
         lost = np.flatnonzero(assign < 0)
@@ -402,7 +407,8 @@ class Labeller:
         for j, m in enumerate(lost):
             if np.isfinite(pred[m]).all():
                 d = np.linalg.norm(X - pred[m], axis=1)
-                cost[:, j] = np.where((d <= cfg.recover_gate_m) & (doubt == 0), d, np.inf)
+                cost[:, j] = np.where(d <= np.where(doubt == 0, cfg.recover_gate_m, cfg.recover_doubt_gate_m),
+                                      d + doubt, np.inf)
             anchor = np.full(len(free), np.inf)
             if m in (LS, RS) and right is not None:
                 other, sign = (RS, -1.0) if m == LS else (LS, 1.0)
@@ -456,6 +462,44 @@ class Labeller:
             named[m] = pts.X[p]
             assign[m] = p
             arow[m] = int(np.flatnonzero(row_pt == p)[0])
+
+    def _recover_leg(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray) -> None:
+        """A leg with neither knee nor ankle named while the other leg has a name is found again
+        as the only pair of free points that fits it: a shin apart, the knee above the ankle,
+        within the rigid distances of the named markers (the same side's shoulder) and not
+        crossed over the other leg (by ``crossed_m`` along the subject's right). The solver,
+        with no marker on that leg, predicts it wherever its pose prior puts it (a subject
+        bending to scoop something up had a leg predicted lifted, 0.5 m off, for a second),
+        so its prediction is not asked; either point may be one a view misses (legs hide each
+        other). assign, arow (8,) in place; nothing before the facing is known."""
+        if self._facing is None:
+            return
+        body = self._body
+        right = right_of(self._facing)
+        for (_s, _w, k, a), (_os, _ow, ok, oa) in ((SIDES[0], SIDES[1]), (SIDES[1], SIDES[0])):
+            if assign[k] >= 0 or assign[a] >= 0 or (assign[ok] < 0 and assign[oa] < 0):
+                continue
+            free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
+            named = np.full((N_MARKERS, 3), np.nan)
+            named[assign >= 0] = pts.X[assign[assign >= 0]]
+            outward = right if k == RK else -right
+            fits = []
+            for i, j in itertools.permutations(free, 2):
+                knee, ankle = pts.X[i], pts.X[j]
+                if knee[2] <= ankle[2] or body.shin_error(knee, ankle) > body.tol:
+                    continue
+                if any(assign[o] >= 0 and float((p - named[o]) @ outward) < -self.config.crossed_m
+                       for o, p in ((ok, knee), (oa, ankle))):
+                    continue
+                trial = named.copy()
+                trial[k], trial[a] = knee, ankle
+                if not body.violations(trial):
+                    fits.append((i, j))
+            if len(fits) == 1:
+                log.debug("t=%.3f s: leg %d-%d found again as the one pair of points that fits it", self._t_frame, k, a)
+                for m, p in zip((k, a), fits[0]):
+                    assign[m] = p
+                    arow[m] = int(np.flatnonzero(row_pt == p)[0])
 
     def _swap_for_shins(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray | None) -> None:
         """Both shins (knee-ankle distances) broken while all four leg markers are named on

@@ -699,3 +699,94 @@ def test_legs_of_a_subject_up_on_a_structure_are_not_named_as_the_upper_body():
     named = _run(labeller, rig, np.repeat(high[None], 20, axis=0), rng)
     wrong = np.isfinite(named).all(axis=2) & ~_right(named, high[None])
     assert not wrong.any(), named[-1] - high
+
+
+def _three_cameras():
+    """The default rig without its last camera: a marker one camera misses is seen by two."""
+    from samba_common.calib import CameraRig
+
+    return CameraRig(default_rig(4).cameras[:3])
+
+
+def _hidden_from(rig, markers, t, rng, hidden, cams):
+    """Packets of markers (8, 3) with the markers ``hidden`` (indices) missing from the cameras
+    ``cams`` (indices), as the body hides them."""
+    part = markers.copy()
+    part[hidden] = np.nan
+    full, less = _packets(rig, markers, t, rng), _packets(rig, part, t, rng)
+    return [less[c] if c in cams else full[c] for c in range(len(rig.cameras))]
+
+
+def _with_wrong_skeleton(lab, rig, joints, hidden, cams, off, rng):
+    """Label joints (F, 13, 3) frame by frame, feeding back a solved skeleton whose joints
+    ``off`` maps (joint index -> (3,) m) are displaced, as a solver guessing a limb it has no
+    marker on. From frame 60 the markers ``hidden`` are missing from the cameras ``cams`` and
+    their tracks are dropped, so only the skeleton predicts them. Returns (F, 8, 3) names."""
+    named = []
+    for i, j in enumerate(joints):
+        t = i / FPS
+        m = j[list(MARKER_JOINT)]
+        if i == 60:
+            lab._pos[hidden], lab._seen[hidden] = np.nan, -np.inf
+        packets = _hidden_from(rig, m, t, rng, hidden, cams) if i >= 60 else _packets(rig, m, t, rng)
+        got, _q = lab.label(packets, t)
+        named.append(got)
+        skel = j.copy()
+        for joint, d in off.items():
+            skel[joint] += d
+        lab.observe(t, skel)
+    return np.array(named)
+
+
+@pytest.mark.parametrize("doubt_gate", [0.30, 0.0])
+def test_a_wrist_one_camera_misses_is_found_again_off_a_wrong_skeleton(doubt_gate):
+    """A hand the body hides from one of three cameras is a 2-view point a view misses: the
+    audit does not trust it, and when the skeleton predicts that wrist 0.25 m off (beyond its
+    gate) only the recovery can name it. With ``recover_doubt_gate_m`` the wrist is named again
+    at once and stays right; without it, it stays unnamed."""
+    from dataclasses import replace
+
+    from samba_common.skeleton import J
+    from samba_server.labelling.rigid import RW
+
+    rig = _three_cameras()
+    joints, _t = synthetic_motion(2.0, FPS)
+    truth = joints[:, list(MARKER_JOINT)]
+    lab = Labeller(rig, config=replace(LabelConfig(), recover_doubt_gate_m=doubt_gate))
+    lab.set_lengths(DEFAULT_LENGTHS)
+    named = _with_wrong_skeleton(lab, rig, joints, [RW], [0], {J["right_wrist"]: np.array([0.0, 0.0, 0.25])},
+                                 np.random.default_rng(11))
+    right = _right(named, truth)
+    assert right[:60].all()
+    if doubt_gate:
+        assert right[61:].all()
+    else:
+        assert not np.isfinite(named[61:, RW]).any() and right[61:, :RW].all() and right[61:, RW + 1:].all()
+
+
+@pytest.mark.parametrize("pair", [True, False])
+def test_a_leg_the_skeleton_lifts_is_found_again_as_the_one_pair_that_fits(pair, monkeypatch):
+    """A subject bending over hides a leg from a camera and the solver, with no marker on
+    that leg, lifts it 0.5 m: neither its prediction (beyond every gate) nor the other marker
+    of the leg (neither named) can find the knee or the ankle again. The only pair of free
+    points a shin apart, knee above ankle, on the right side of the other leg, is that leg:
+    named again at once; without the rule it stays unnamed."""
+    from samba_common.skeleton import J
+    from samba_server.labelling.rigid import RA, RK
+
+    if not pair:
+        monkeypatch.setattr(Labeller, "_recover_leg", lambda self, *a: None)
+    rig = _three_cameras()
+    joints, _t = synthetic_motion(2.0, FPS)
+    truth = joints[:, list(MARKER_JOINT)]
+    lab = Labeller(rig)
+    lab.set_lengths(DEFAULT_LENGTHS)
+    lift = np.array([0.0, 0.3, 0.4])
+    named = _with_wrong_skeleton(lab, rig, joints, [RK, RA], [0], {J["right_knee"]: lift, J["right_ankle"]: lift},
+                                 np.random.default_rng(12))
+    right = _right(named, truth)
+    assert right[:60].all()
+    if pair:
+        assert right[61:].all()
+    else:
+        assert not np.isfinite(named[61:, [RK, RA]]).any()
