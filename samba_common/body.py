@@ -174,7 +174,7 @@ def prepend_standard_pose(joints: np.ndarray, fps: float, seconds: float = 1.0, 
     origin, R, dirs = decompose(joints)
     take = fk(origin, R, dirs, lens)
     floor = float(np.nanmin(take[..., 2]))
-    stand = standard_pose(lens, (origin[0, 0], origin[0, 1]), ankle_height=max(floor, 0.0) if floor > 0 else ANKLE_HEIGHT)
+    stand = standard_pose(lens, (origin[0, 0], origin[0, 1]), ankle_height=floor if floor > 0 else ANKLE_HEIGHT)
     n_std, n_blend = int(round(seconds * fps)), int(round(blend * fps))
     s_origin, _s_R, s_dirs = decompose(stand[None])
     out = [np.repeat(stand[None], n_std, axis=0)]

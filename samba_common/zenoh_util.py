@@ -108,3 +108,19 @@ def make_config(mode: str = "peer", listen: Iterable[str] = (), connect: Iterabl
     for k, v in (extra or {}).items():
         cfg.insert_json5(k, json.dumps(v))
     return cfg
+
+
+def first_reply(session: Any, key: str, timeout: float) -> tuple[bytes | None, str | None]:
+    """Ask a Zenoh queryable: (payload, None) for the first good reply; (None, reason) when
+    the replies were errors or the query failed (Zenoh answers a query nobody finished in
+    time with a "Timeout" error: a busy server, ask again); (None, None) when nobody serves
+    ``key`` (the query ends at once, without a reply)."""
+    reason = None
+    try:
+        for reply in session.get(key, timeout=timeout):
+            if reply.ok is not None:
+                return reply.ok.payload.to_bytes(), None
+            reason = reason or reply.err.payload.to_bytes()[:200].decode("utf-8", "replace")
+    except Exception as exc:
+        return None, reason or str(exc) or type(exc).__name__
+    return None, reason

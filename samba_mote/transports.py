@@ -100,14 +100,10 @@ class ZenohTransport(_Ctx):
 
     def fetch_calibration(self, timeout: float = 2.0) -> bytes | None:
         """calibration.toml bytes from the server's queryable, or None (no reply in time)."""
-        try:
-            for reply in self.session.get(zk.calibration_key(self.session_name), timeout=timeout):
-                if reply.ok is not None:
-                    return reply.ok.payload.to_bytes()
-                log.warning("calibration query error: %s", reply.err.payload.to_bytes()[:200])
-        except Exception as exc:
-            log.warning("calibration query failed: %s", exc)
-        return None
+        payload, reason = zk.first_reply(self.session, zk.calibration_key(self.session_name), timeout)
+        if payload is None and reason is not None:
+            log.warning("calibration query failed: %s", reason)
+        return payload
 
     def close(self) -> None:
         try:

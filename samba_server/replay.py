@@ -269,12 +269,14 @@ class Player:
 def _query_json(z, key: str, timeout: float) -> dict | None:
     """The first JSON reply of a Zenoh query on ``key``; ``{}`` when the query timed out or
     failed (a busy server: ask again); None when nobody serves ``key`` (the query ends at once)."""
+    payload, reason = zk.first_reply(z, key, timeout)
+    if payload is None:
+        if reason is not None:
+            log.debug("query %s failed: %s", key, reason)
+            return {}
+        return None
     try:
-        for reply in z.get(key, timeout=timeout):
-            if reply.ok is not None:
-                return json.loads(reply.ok.payload.to_bytes())
-            return {}  # e.g. "Timeout"
-    except Exception as exc:
-        log.debug("query %s failed: %s", key, exc)
+        return json.loads(payload)
+    except ValueError as exc:
+        log.debug("query %s: not JSON: %s", key, exc)
         return {}
-    return None

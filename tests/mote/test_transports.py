@@ -40,6 +40,30 @@ def test_key_expressions() -> None:
         zk.markers_key("a/b", "cam0")
 
 
+def test_first_reply_tells_an_answer_an_error_and_nobody_apart(free_port: int) -> None:
+    """What the mote's calibration fetch and the replay's progress poll rely on: a reply's
+    payload, an error reply's reason (the mote logs it, the player asks again), and None for a
+    key nobody serves (the player falls back), over real Zenoh on loopback."""
+    server = _server(free_port)
+    client = zenoh.open(zk.make_config(connect=[f"tcp/127.0.0.1:{free_port}"]))
+    qs = [server.declare_queryable("t/ok", lambda q: q.reply(q.key_expr, b"calibration")),
+          server.declare_queryable("t/err", lambda q: q.reply_err(b"no calibration loaded"))]
+    try:
+        deadline = time.monotonic() + 5.0
+        while zk.first_reply(client, "t/ok", 0.5)[0] is None and time.monotonic() < deadline:
+            time.sleep(0.05)  # until the sessions have met
+        assert zk.first_reply(client, "t/ok", 2.0) == (b"calibration", None)
+        assert zk.first_reply(client, "t/err", 2.0) == (None, "no calibration loaded")
+        t0 = time.monotonic()
+        assert zk.first_reply(client, "t/nobody", 2.0) == (None, None)
+        assert time.monotonic() - t0 < 1.5  # nobody serves it: the query ends at once
+    finally:
+        for q in qs:
+            q.undeclare()
+        client.close()
+        server.close()
+
+
 def test_zenoh_mote_to_server_loopback(free_port: int, small_take) -> None:
     server = _server(free_port)
     inbox: queue.Queue = queue.Queue()
