@@ -60,7 +60,6 @@ class LabelConfig:
     merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
-    recover_doubt_gate_m: float = 0.30  #: ... or a 2-view point one view misses, this far, at its unexplained cost
     wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
     glued_wrist_s: float = 0.3  #: a wrist held a shoulder width from the other shoulder this long, its own shoulder unnamed, is that shoulder
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
@@ -380,13 +379,12 @@ class Labeller:
         about it) would otherwise never be found again.
 
         A point that is surely a marker (>= 3 views, or no view missing it) is a candidate for a
-        marker within ``recover_gate_m`` of its prediction, a 2-view point that one other view
-        misses (a hand the body hides from a camera) within ``recover_doubt_gate_m`` at the
-        cost ``unexplained_m`` more; either is a candidate where the named markers put it: a
-        shoulder a shoulder width from the other along the subject's right, a knee a shin above
-        its ankle, an ankle a shin below its knee. The candidates are assigned optimally; a pair
-        is kept when the best assignment without it costs ``recover_margin_m`` more and the
-        marker's rigid distances hold. A leg with neither marker named is first looked for as a
+        marker within ``recover_gate_m`` of its prediction; it, or a 2-view point that one
+        other view misses, is a candidate where the named markers put it: a shoulder a shoulder
+        width from the other along the subject's right, a knee a shin above its ankle, an ankle
+        a shin below its knee. The candidates are assigned optimally; a pair is kept when the
+        best assignment without it costs ``recover_margin_m`` more and the marker's rigid
+        distances hold. A leg with neither marker named is first looked for as a
         pair (:meth:`_recover_leg`). assign, arow (8,) in place."""
         cfg = self.config
         body = self._body
@@ -407,8 +405,7 @@ class Labeller:
         for j, m in enumerate(lost):
             if np.isfinite(pred[m]).all():
                 d = np.linalg.norm(X - pred[m], axis=1)
-                cost[:, j] = np.where(d <= np.where(doubt == 0, cfg.recover_gate_m, cfg.recover_doubt_gate_m),
-                                      d + doubt, np.inf)
+                cost[:, j] = np.where((d <= cfg.recover_gate_m) & (doubt == 0), d, np.inf)
             anchor = np.full(len(free), np.inf)
             if m in (LS, RS) and right is not None:
                 other, sign = (RS, -1.0) if m == LS else (LS, 1.0)
@@ -471,8 +468,10 @@ class Labeller:
         with no marker on that leg, predicts it wherever its pose prior puts it (a subject
         bending to scoop something up had a leg predicted lifted, 0.5 m off, for a second),
         so its prediction is not asked; either point may be one a view misses (legs hide each
-        other). assign, arow (8,) in place; nothing before the facing is known."""
-        if self._facing is None:
+        other). With two cameras every point is a 2-view point and ghosts pair up as easily as
+        legs (the 2-camera benchmark lost 15 points on a jump take): the rule needs three.
+        assign, arow (8,) in place; nothing before the facing is known."""
+        if self._facing is None or len(self.rig) < 3:
             return
         body = self._body
         right = right_of(self._facing)

@@ -738,32 +738,6 @@ def _with_wrong_skeleton(lab, rig, joints, hidden, cams, off, rng):
     return np.array(named)
 
 
-@pytest.mark.parametrize("doubt_gate", [0.30, 0.0])
-def test_a_wrist_one_camera_misses_is_found_again_off_a_wrong_skeleton(doubt_gate):
-    """A hand the body hides from one of three cameras is a 2-view point a view misses: the
-    audit does not trust it, and when the skeleton predicts that wrist 0.25 m off (beyond its
-    gate) only the recovery can name it. With ``recover_doubt_gate_m`` the wrist is named again
-    at once and stays right; without it, it stays unnamed."""
-    from dataclasses import replace
-
-    from samba_common.skeleton import J
-    from samba_server.labelling.rigid import RW
-
-    rig = _three_cameras()
-    joints, _t = synthetic_motion(2.0, FPS)
-    truth = joints[:, list(MARKER_JOINT)]
-    lab = Labeller(rig, config=replace(LabelConfig(), recover_doubt_gate_m=doubt_gate))
-    lab.set_lengths(DEFAULT_LENGTHS)
-    named = _with_wrong_skeleton(lab, rig, joints, [RW], [0], {J["right_wrist"]: np.array([0.0, 0.0, 0.25])},
-                                 np.random.default_rng(11))
-    right = _right(named, truth)
-    assert right[:60].all()
-    if doubt_gate:
-        assert right[61:].all()
-    else:
-        assert not np.isfinite(named[61:, RW]).any() and right[61:, :RW].all() and right[61:, RW + 1:].all()
-
-
 @pytest.mark.parametrize("pair", [True, False])
 def test_a_leg_the_skeleton_lifts_is_found_again_as_the_one_pair_that_fits(pair, monkeypatch):
     """A subject bending over hides a leg from a camera and the solver, with no marker on
