@@ -24,7 +24,6 @@ live labels exactly.
 
 from __future__ import annotations
 
-import itertools
 import logging
 import math
 from dataclasses import dataclass, field
@@ -482,11 +481,14 @@ class Labeller:
             named = np.full((N_MARKERS, 3), np.nan)
             named[assign >= 0] = pts.X[assign[assign >= 0]]
             outward = right if k == RK else -right
+            X = pts.X[free]
+            # (knee, ankle) candidates a shin apart, knee above: few, so clutter costs little
+            shin_ok = (np.abs(np.linalg.norm(X[:, None] - X[None], axis=2) - body.shin) <= body.tol) & \
+                (X[:, None, 2] > X[None, :, 2])
+            ki, ai = np.nonzero(shin_ok)
             fits = []
-            for i, j in itertools.permutations(free, 2):
+            for i, j in zip(free[ki], free[ai]):
                 knee, ankle = pts.X[i], pts.X[j]
-                if knee[2] <= ankle[2] or body.shin_error(knee, ankle) > body.tol:
-                    continue
                 if any(assign[o] >= 0 and float((p - named[o]) @ outward) < -self.config.crossed_m
                        for o, p in ((ok, knee), (oa, ankle))):
                     continue
