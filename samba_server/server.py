@@ -96,6 +96,7 @@ class Server:
         db = getattr(reconstructor, "db", None)
         self.labeller = Labeller(rig, self.triangulator, label_config,
                                  prior_lengths=None if db is None else db.mean_lengths)
+        self.labeller.pose_fit = getattr(reconstructor, "body_distance", None)
         self.reconstructor = reconstructor
         self.recorder = recorder
         self.publish = publish

@@ -27,6 +27,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -68,6 +69,8 @@ class LabelConfig:
     knees_crossed_s: float = 1.0  #: knees crossed (by crossed_m) this long are the legs' names swapped (inf: never)
     arm_swap_s: float = 0.05  #: a shoulder off the shoulder width whose own wrist's point fits it this long swaps with that wrist (inf: never)
     shin_swap_min: float = 0.5  #: a leg pair is swapped when that mends a broken shin and the other shin is broken by at least this share of the tolerance (inf: never)
+    fit_swap_ratio: float = 0.6  #: names swapped when that brings the 8 markers this much nearer (ratio) a database pose ...
+    fit_swap_s: float = 0.03  #: ... the same swap in every frame for this long (inf: never)
     track_timeout: float = 0.12  #: a marker unseen for longer is predicted from the skeleton
     skeleton_max_age: float = 0.4  #: the skeleton predicts markers up to this long after the last solved pose
     min_tracked: int = 3  #: fewer predictable markers: identify from the points
@@ -153,6 +156,10 @@ class Labeller:
         self._shared = np.zeros(N_MARKERS, bool)
         self._knees_crossed_since: float | None = None
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
+        self._fit_swap: tuple[int, float] | None = None  # (swap, since when) that makes the names fit a body better
+        #: (H, 8, 3) marker sets -> (H,) distance to the nearest body the motion database knows
+        #: (:meth:`Reconstructor.body_distance`; the server sets it), or None
+        self.pose_fit: Callable[[np.ndarray], np.ndarray] | None = None
         self._t_audit = -np.inf
         self._t_frame = self._t_prev = -np.inf  # this frame's and the previous frame's times
         self._free_hist: list[tuple[float, np.ndarray]] = []  # (t, free sure points (F, 3)) over the last second
@@ -187,6 +194,7 @@ class Labeller:
         """Forget what the swap rules saw held over time: it was about the names before."""
         self._knees_crossed_since = None
         self._arm_swap_since = [None, None]
+        self._fit_swap = None
         self._glue = ([], [])
 
     # ------------------------------------------------------------------ per frame
@@ -357,6 +365,7 @@ class Labeller:
         self._recover(pts, pred, assign, arow, row_pt)
         back = lost_before & (assign >= 0)
         out[back] = pts.X[assign[back]]
+        self._swap_to_fit(out, pred, assign, arow, t)
         named = np.flatnonzero(assign >= 0)
         margin = float("nan")
         if named.size:
@@ -542,6 +551,43 @@ class Labeller:
                 log.debug("t=%.3f s: shoulder %d and its wrist swapped: the wrist's point fits the shoulder width", t, s)
                 self._arm_swap_since[i] = None
                 self._swap([(s, w)], out, assign, arow)
+
+    def _swap_to_fit(self, out: np.ndarray, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
+                     t: float) -> None:
+        """The names are compared with the motion database (``pose_fit``) against each
+        confusion tracking can make (a wrist and its shoulder, the two wrists, knees, ankles or
+        legs, a knee and its ankle, a wrist and the other shoulder, the mirror image) of markers
+        named on points: a swap that brings the markers within ``fit_swap_ratio`` of their
+        distance to the nearest body, the same swap in every frame for ``fit_swap_s``, is made
+        (names and tracks). Unnamed markers stand at their predictions pred (8, 3) for the
+        comparison (none without one). A hand passing its shoulder can leave the two names the
+        other way round, each a plausible distance from the other markers, so no rigid length
+        tells; the pose they make (a shoulder in front of the chest, the arm folded through it)
+        is one no body in the database takes. out (8, 3), assign, arow (8,) in place."""
+        cfg = self.config
+        base = np.where((assign >= 0)[:, None], out, pred)
+        if self.pose_fit is None or not math.isfinite(cfg.fit_swap_s) or not np.isfinite(base).all():
+            self._fit_swap = None
+            return
+        sets = [base]
+        for pairs in _FIT_SWAPS:
+            alt = base.copy()
+            for m, n in pairs:
+                alt[[m, n]] = base[[n, m]]
+            sets.append(alt)
+        dist = self.pose_fit(np.array(sets))
+        # only swaps of names given to points (an unnamed marker's prediction is not a name)
+        usable = np.array([all(assign[m] >= 0 and assign[n] >= 0 for m, n in pairs) for pairs in _FIT_SWAPS])
+        dist[1:][~usable] = np.nan
+        best = int(np.nanargmin(dist[1:])) if np.isfinite(dist[1:]).any() else -1
+        holds = best >= 0 and bool(dist[1 + best] < cfg.fit_swap_ratio * dist[0])
+        if not holds or self._fit_swap is None or self._fit_swap[0] != best:
+            self._fit_swap = (best, t) if holds else None
+        if self._fit_swap is not None and t - self._fit_swap[1] >= cfg.fit_swap_s - 1e-6:
+            log.debug("t=%.3f s: names %s swapped: %.3f m from a database body, %.3f as they were", t,
+                      _FIT_SWAPS[best], dist[1 + best], dist[0])
+            self._fit_swap = None
+            self._swap(list(_FIT_SWAPS[best]), out, assign, arow)
 
     def _uncross_knees(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray,
                        t: float) -> None:
@@ -805,6 +851,11 @@ def _split_shared(out: np.ndarray, assign: np.ndarray, pred: np.ndarray, half: f
 
 #: per side: (its shoulder, its wrist, the other shoulder)
 _ARMS = ((LS, LW, RS), (RS, RW, LS))
+#: the confusions :meth:`Labeller._swap_to_fit` checks: a wrist and its shoulder, the wrists, the
+#: knees, the ankles, the legs, a knee and its ankle, a wrist and the other shoulder, the mirror
+_FIT_SWAPS: tuple[tuple[tuple[int, int], ...], ...] = (
+    ((LS, LW),), ((RS, RW),), ((LW, RW),), ((LK, RK),), ((LA, RA),), ((LK, RK), (LA, RA)), ((LK, LA),),
+    ((RK, RA),), ((LS, RW),), ((RS, LW),), ((LS, RS), (LW, RW), (LK, RK), (LA, RA)))
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
 
 

@@ -12,6 +12,7 @@ into ``left[n]`` and ``right[n]`` (-1 for leaves).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,6 +64,10 @@ class KDTree:
     def query(self, q: np.ndarray, k: int) -> np.ndarray:
         """Indices (min(k, N),) of the nearest points to q (D,), nearest first."""
         return knn(*self.arrays(), np.ascontiguousarray(q, dtype=np.float64), min(k, len(self.data)))
+
+    def nearest_distance(self, queries: np.ndarray) -> np.ndarray:
+        """Distance (H,) from each of queries (H, D) to its nearest point, in one compiled call."""
+        return _nearest_distances(*self.arrays(), np.ascontiguousarray(queries, dtype=np.float64))
 
 
 @njit(cache=True, fastmath=FAST, nogil=True)
@@ -176,3 +181,18 @@ def knn(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, q_ra
             stack[sp + 1] = right[nd]
         sp += 2
     return best_i
+
+
+@njit(cache=True, fastmath=FAST)
+def _nearest_distances(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, queries):
+    """Distance (H,) from each row of queries (H, D) to its nearest point (rotation keeps distances)."""
+    out = np.empty(queries.shape[0])
+    for h in range(queries.shape[0]):
+        p = knn(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, queries[h], 1)[0]
+        q = np.dot(queries[h] - center, rot)
+        s = 0.0
+        for c in range(data.shape[1]):
+            diff = data[p, c] - q[c]
+            s += diff * diff
+        out[h] = math.sqrt(s)
+    return out

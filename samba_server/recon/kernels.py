@@ -805,6 +805,32 @@ def solve_frame(db_dirs, db_up, nbrs, dims, n_dims, cos_a, sin_a, lengths, offse
 
 
 @njit(cache=True, fastmath=FAST)
+def search_feature(m, up_weight):
+    """The pose-search feature of 8 world markers m (8, 3): (marker axes RA (3, 3), origin (3,)
+    the shoulder midpoint, feature (27,): the markers in the marker body frame, then world up
+    in that frame times ``up_weight``)."""
+    RA = marker_axes(m)
+    origin = 0.5 * (m[0] + m[1])
+    feature = np.empty(27)
+    for i in range(8):
+        for c in range(3):
+            feature[3 * i + c] = ((m[i, 0] - origin[0]) * RA[0, c] + (m[i, 1] - origin[1]) * RA[1, c]
+                                  + (m[i, 2] - origin[2]) * RA[2, c])
+    for c in range(3):
+        feature[24 + c] = up_weight * RA[2, c]
+    return RA, origin, feature
+
+
+@njit(cache=True, fastmath=FAST)
+def search_features(sets, up_weight):
+    """:func:`search_feature` of each of sets (H, 8, 3) (complete marker sets): (H, 27)."""
+    out = np.empty((sets.shape[0], 27))
+    for h in range(sets.shape[0]):
+        out[h] = search_feature(sets[h], up_weight)[2]
+    return out
+
+
+@njit(cache=True, fastmath=FAST)
 def _partial_knn(features, cols, n_cols, feature, k):
     """Nearest poses on the finite entries of ``feature`` among columns cols[:n_cols] (brute force;
     used only when a marker is unseen and there is no prediction to fill it)."""
@@ -868,15 +894,7 @@ def frame(markers, has_pred, n_hist, q1, q2, m1, m2, has_state, R0, o0, d0, dt, 
             return 2, q, R0, o0, d0, 0, np.nan, n_seen, mk
     if filled[0, 0] == filled[1, 0] and filled[0, 1] == filled[1, 1] and filled[0, 2] == filled[1, 2]:
         return 2, q, R0, o0, d0, 0, np.nan, n_seen, mk
-    RA = marker_axes(filled)
-    origin = 0.5 * (filled[0] + filled[1])
-    feature = np.empty(27)
-    for i in range(8):
-        for c in range(3):
-            feature[3 * i + c] = ((filled[i, 0] - origin[0]) * RA[0, c] + (filled[i, 1] - origin[1]) * RA[1, c]
-                                  + (filled[i, 2] - origin[2]) * RA[2, c])
-    for c in range(3):
-        feature[24 + c] = up_weight * RA[2, c]
+    RA, origin, feature = search_feature(filled, up_weight)
     P = len(trees)
     nbrs = np.empty((P, k), dtype=np.int64)
     for part in range(P):

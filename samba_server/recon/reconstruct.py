@@ -224,6 +224,7 @@ class Reconstructor:
         its KD-trees (lengths, index, tree arrays)."""
         index = PoseIndex(self.db, lengths, self.offsets if offsets is None else offsets)
         trees = tuple(index.tree(c).arrays() for c in (PART_FEATURES if self.config.parts else WHOLE[:1]))
+        index.tree(WHOLE[0])  # for body_distance, built here (in the body worker thread when live)
         return lengths, index, trees
 
     def _set_subject(self, subject: Subject, built: tuple | None = None) -> None:
@@ -250,6 +251,22 @@ class Reconstructor:
         single = j.ndim == 2
         m = markers_from_joints(j[None] if single else j, self.offsets)
         return m[0] if single else m
+
+    def body_distance(self, markers: np.ndarray) -> np.ndarray:
+        """How much like a body of this subject each marker set is: markers (H, 8, 3) world
+        metres -> (H,) distance (metres, rms over the 8 markers and the up vector) from the
+        set's aligned search feature to the nearest database pose re-posed for this subject (the
+        motion database knows what bodies look like: a wrist named for its shoulder makes a
+        pose no database body takes). NaN for sets with an unnamed marker, and for every set
+        before the subject's body is known. Costs one KD-tree query per set."""
+        m = np.asarray(markers, dtype=float).reshape(-1, N_MARKERS, 3)
+        out = np.full(len(m), np.nan)
+        ok = np.isfinite(m).all(axis=(1, 2))
+        if self.index is None or not ok.any():
+            return out
+        feats = kernels.search_features(np.ascontiguousarray(m[ok]), UP_WEIGHT)
+        out[ok] = self.index.tree(WHOLE[0]).nearest_distance(feats) / 3.0
+        return out
 
     def reset(self) -> None:
         """Forget the temporal history (a new take or a long gap); keeps the body."""

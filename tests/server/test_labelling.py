@@ -764,3 +764,45 @@ def test_a_leg_the_skeleton_lifts_is_found_again_as_the_one_pair_that_fits(pair,
         assert right[61:].all()
     else:
         assert not np.isfinite(named[61:, [RK, RA]]).any()
+
+
+#: a CMU pose (the playground clip 006_11, mirrored) on the default body, upright and facing +Y:
+#: the left hand raised beside its shoulder, 20 cm from it
+_HAND_BY_SHOULDER = np.array([
+    [-0.1775, 0.0, 1.3914], [0.1775, 0.0, 1.451], [-0.3055, 0.109, 1.2823], [0.3095, -0.0402, 0.9822],
+    [-0.0312, 0.1083, 0.4904], [0.1297, 0.0569, 0.4869], [-0.0677, -0.0462, 0.08], [0.1295, -0.1162, 0.0824]])
+
+
+@pytest.mark.parametrize("rule", [True, False])
+def test_a_wrist_and_its_shoulder_named_the_other_way_round_fit_no_body_and_are_swapped_back(rule):
+    """The left hand held up beside its shoulder and the two names swapped in tracking
+    (injected). The rigid lengths allow the swapped names (a wrist 20 cm from the shoulder, a
+    shoulder width kept within the tolerance), and tracking keeps them; the motion database
+    does not: no body in it (here without the clip the pose comes from) takes the pose the
+    swapped names make. With the rule (the server hands the labeller the reconstructor's
+    ``body_distance``) the names come back within 0.1 s; without it they stay swapped."""
+    from dataclasses import replace
+
+    from samba_server.labelling.rigid import LS, LW
+    from samba_server.recon.db import load_default_db
+    from samba_server.recon.reconstruct import Reconstructor
+    from samba_server.server import Server
+
+    rig = default_rig(4)
+    rec = Reconstructor(load_default_db().without(lambda name: name.split("~")[0] == "006_11"), lengths=DEFAULT_LENGTHS)
+    pose = _HAND_BY_SHOULDER
+    swapped = pose.copy()
+    swapped[[LS, LW]] = pose[[LW, LS]]
+    near = rec.body_distance(np.array([pose, swapped]))
+    assert near[0] < 0.5 * near[1]
+    cfg = LabelConfig() if rule else replace(LabelConfig(), fit_swap_s=float("inf"))
+    lab = Server(rig, reconstructor=rec, label_config=cfg).labeller
+    lab.set_lengths(DEFAULT_LENGTHS)
+    truth = np.repeat(pose[None], 60, axis=0)
+    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(3), 30, [LS, LW])
+    right = _right(named, truth).all(axis=1)
+    assert right[:30].all()
+    if rule:
+        assert right[30 + int(0.1 * FPS):].all()
+    else:
+        assert not right[32:].any()
