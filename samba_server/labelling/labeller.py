@@ -156,10 +156,11 @@ class Labeller:
         self._shared = np.zeros(N_MARKERS, bool)
         self._knees_crossed_since: float | None = None
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
-        self._fit_swap: tuple[int, float] | None = None  # (swap, since when) that makes the names fit a body better
-        #: (H, 8, 3) marker sets -> (H,) distance to the nearest body the motion database knows
-        #: (:meth:`Reconstructor.body_distance`; the server sets it), or None
-        self.pose_fit: Callable[[np.ndarray], np.ndarray] | None = None
+        self._fit_swap: tuple[int, float] | None = None  # (row of _FIT_SWAPS, since when) that makes the names fit a body better
+        #: (H, 8, 3) marker sets [, within] -> (H,) distance to the nearest body the motion
+        #: database knows, inf beyond within (:meth:`Reconstructor.body_distance`; the server
+        #: sets it), or None
+        self.pose_fit: Callable[..., np.ndarray] | None = None
         self._t_audit = -np.inf
         self._t_frame = self._t_prev = -np.inf  # this frame's and the previous frame's times
         self._free_hist: list[tuple[float, np.ndarray]] = []  # (t, free sure points (F, 3)) over the last second
@@ -569,25 +570,24 @@ class Labeller:
         if self.pose_fit is None or not math.isfinite(cfg.fit_swap_s) or not np.isfinite(base).all():
             self._fit_swap = None
             return
-        sets = [base]
-        for pairs in _FIT_SWAPS:
-            alt = base.copy()
-            for m, n in pairs:
-                alt[[m, n]] = base[[n, m]]
-            sets.append(alt)
-        dist = self.pose_fit(np.array(sets))
         # only swaps of names given to points (an unnamed marker's prediction is not a name)
-        usable = np.array([all(assign[m] >= 0 and assign[n] >= 0 for m, n in pairs) for pairs in _FIT_SWAPS])
-        dist[1:][~usable] = np.nan
-        best = int(np.nanargmin(dist[1:])) if np.isfinite(dist[1:]).any() else -1
-        holds = best >= 0 and bool(dist[1 + best] < cfg.fit_swap_ratio * dist[0])
+        usable = np.flatnonzero(~(_FIT_MOVES & (assign < 0)).any(axis=1))
+        dist0 = float(self.pose_fit(base[None])[0])
+        best, holds = -1, False
+        if usable.size and math.isfinite(dist0):
+            # only swaps that fit clearly better are looked for (a bound the search prunes with)
+            dist = self.pose_fit(base[_FIT_SWAPS[usable]], cfg.fit_swap_ratio * dist0)
+            i = int(np.argmin(dist))
+            best, holds = int(usable[i]), bool(dist[i] < cfg.fit_swap_ratio * dist0)
         if not holds or self._fit_swap is None or self._fit_swap[0] != best:
             self._fit_swap = (best, t) if holds else None
         if self._fit_swap is not None and t - self._fit_swap[1] >= cfg.fit_swap_s - 1e-6:
-            log.debug("t=%.3f s: names %s swapped: %.3f m from a database body, %.3f as they were", t,
-                      _FIT_SWAPS[best], dist[1 + best], dist[0])
+            perm = _FIT_SWAPS[best]
+            pairs = [(m, int(perm[m])) for m in range(N_MARKERS) if perm[m] > m]
+            log.debug("t=%.3f s: names %s swapped: %.3f m from a database body, %.3f as they were", t, pairs,
+                      dist[i], dist0)
             self._fit_swap = None
-            self._swap(list(_FIT_SWAPS[best]), out, assign, arow)
+            self._swap(pairs, out, assign, arow)
 
     def _uncross_knees(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray,
                        t: float) -> None:
@@ -851,11 +851,24 @@ def _split_shared(out: np.ndarray, assign: np.ndarray, pred: np.ndarray, half: f
 
 #: per side: (its shoulder, its wrist, the other shoulder)
 _ARMS = ((LS, LW, RS), (RS, RW, LS))
-#: the confusions :meth:`Labeller._swap_to_fit` checks: a wrist and its shoulder, the wrists, the
-#: knees, the ankles, the legs, a knee and its ankle, a wrist and the other shoulder, the mirror
-_FIT_SWAPS: tuple[tuple[tuple[int, int], ...], ...] = (
+
+
+def _permutations(swaps: tuple[tuple[tuple[int, int], ...], ...]) -> np.ndarray:
+    """(S, 8) marker order of each swap of (m, n) name pairs: markers[perm] swaps them."""
+    out = np.tile(np.arange(N_MARKERS), (len(swaps), 1))
+    for row, pairs in zip(out, swaps):
+        for m, n in pairs:
+            row[[m, n]] = row[[n, m]]
+    return out
+
+
+#: the confusions :meth:`Labeller._swap_to_fit` checks, as (S, 8) marker orders: a wrist and
+#: its shoulder, the wrists, the knees, the ankles, the legs, a knee and its ankle, a wrist and
+#: the other shoulder, the mirror image; and (S, 8) the markers each one moves
+_FIT_SWAPS = _permutations((
     ((LS, LW),), ((RS, RW),), ((LW, RW),), ((LK, RK),), ((LA, RA),), ((LK, RK), (LA, RA)), ((LK, LA),),
-    ((RK, RA),), ((LS, RW),), ((RS, LW),), ((LS, RS), (LW, RW), (LK, RK), (LA, RA)))
+    ((RK, RA),), ((LS, RW),), ((RS, LW),), ((LS, RS), (LW, RW), (LK, RK), (LA, RA))))
+_FIT_MOVES = _FIT_SWAPS != np.arange(N_MARKERS)
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
 
 

@@ -65,9 +65,12 @@ class KDTree:
         """Indices (min(k, N),) of the nearest points to q (D,), nearest first."""
         return knn(*self.arrays(), np.ascontiguousarray(q, dtype=np.float64), min(k, len(self.data)))
 
-    def nearest_distance(self, queries: np.ndarray) -> np.ndarray:
-        """Distance (H,) from each of queries (H, D) to its nearest point, in one compiled call."""
-        return _nearest_distances(*self.arrays(), np.ascontiguousarray(queries, dtype=np.float64))
+    def nearest_distance(self, queries: np.ndarray, within: np.ndarray | float = np.inf) -> np.ndarray:
+        """Distance (H,) from each of queries (H, D) to its nearest point, in one compiled call;
+        inf where no point is nearer than within (scalar or (H,)), which a small bound finds fast."""
+        queries = np.ascontiguousarray(queries, dtype=np.float64).reshape(-1, self.data.shape[1])
+        bound = np.ascontiguousarray(np.broadcast_to(np.asarray(within, dtype=np.float64), len(queries)))
+        return _nearest_distances(*self.arrays(), queries, bound)
 
 
 @njit(cache=True, fastmath=FAST, nogil=True)
@@ -138,12 +141,19 @@ def _box_dist(lo, hi, n, q):
 
 @njit(cache=True, fastmath=FAST)
 def knn(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, q_raw, k):
-    """k nearest neighbours of q_raw (D,) in the tree; indices (k,) nearest first (compiled).
+    """k nearest neighbours of q_raw (D,) in the tree; indices (k,) nearest first (compiled)."""
+    return _search(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, q_raw, k, np.inf)[0]
+
+
+@njit(cache=True, fastmath=FAST)
+def _search(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, q_raw, k, bound2):
+    """The k nearest points to q_raw (D,) closer than sqrt(bound2): (indices (k,), squared
+    distances (k,)), nearest first, -1 / inf where fewer are that close.
 
     Depth-first, nearer child first, pruning nodes whose bounding box is farther than the
-    current k-th distance."""
+    current k-th distance (at first ``bound2``: a small bound prunes most of the tree)."""
     q = np.dot(q_raw - center, rot)
-    best_d = np.full(k, np.inf)
+    best_d = np.full(k, bound2)
     best_i = np.full(k, -1, dtype=np.int64)
     stack = np.empty(128, dtype=np.int64)
     stack[0] = 0
@@ -180,19 +190,19 @@ def knn(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, q_ra
             stack[sp] = left[nd]
             stack[sp + 1] = right[nd]
         sp += 2
-    return best_i
+    for j in range(k):
+        if best_i[j] < 0:
+            best_d[j] = np.inf
+    return best_i, best_d
 
 
 @njit(cache=True, fastmath=FAST)
-def _nearest_distances(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, queries):
-    """Distance (H,) from each row of queries (H, D) to its nearest point (rotation keeps distances)."""
+def _nearest_distances(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, queries, within):
+    """Distance (H,) from each row of queries (H, D) to its nearest point, inf where none is
+    nearer than within (H,)."""
     out = np.empty(queries.shape[0])
     for h in range(queries.shape[0]):
-        p = knn(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, queries[h], 1)[0]
-        q = np.dot(queries[h] - center, rot)
-        s = 0.0
-        for c in range(data.shape[1]):
-            diff = data[p, c] - q[c]
-            s += diff * diff
-        out[h] = math.sqrt(s)
+        d2 = _search(data, perm, start, end, dim, val, left, right, lo, hi, center, rot, queries[h], 1,
+                     within[h] * within[h])[1][0]
+        out[h] = math.sqrt(d2)
     return out
