@@ -70,7 +70,8 @@ class LabelConfig:
     arm_swap_s: float = 0.05  #: a shoulder off the shoulder width whose own wrist's point fits it this long swaps with that wrist (inf: never)
     shin_swap_min: float = 0.5  #: a leg pair is swapped when that mends a broken shin and the other shin is broken by at least this share of the tolerance (inf: never)
     fit_swap_ratio: float = 0.6  #: names swapped when that brings the 8 markers this much nearer (ratio) a database pose ...
-    fit_swap_s: float = 0.03  #: ... the same swap in every frame for this long (inf: never)
+    fit_swap_s: float = 0.05  #: ... the same swap at every check for this long (inf: never) ...
+    fit_interval: float = 0.05  #: ... checked this often (s; 0: every frame)
     track_timeout: float = 0.12  #: a marker unseen for longer is predicted from the skeleton
     skeleton_max_age: float = 0.4  #: the skeleton predicts markers up to this long after the last solved pose
     min_tracked: int = 3  #: fewer predictable markers: identify from the points
@@ -157,6 +158,7 @@ class Labeller:
         self._knees_crossed_since: float | None = None
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
         self._fit_swap: tuple[int, float] | None = None  # (row of _FIT_SWAPS, since when) that makes the names fit a body better
+        self._t_fit = -np.inf  # last database-fit check
         #: (H, 8, 3) marker sets [, within] -> (H,) distance to the nearest body the motion
         #: database knows, inf beyond within (:meth:`Reconstructor.body_distance`; the server
         #: sets it), or None
@@ -559,13 +561,16 @@ class Labeller:
         confusion tracking can make (a wrist and its shoulder, the two wrists, knees, ankles or
         legs, a knee and its ankle, a wrist and the other shoulder, the mirror image) of markers
         named on points: a swap that brings the markers within ``fit_swap_ratio`` of their
-        distance to the nearest body, the same swap in every frame for ``fit_swap_s``, is made
-        (names and tracks). Unnamed markers stand at their predictions pred (8, 3) for the
+        distance to the nearest body, the same swap at every check (each ``fit_interval``) for
+        ``fit_swap_s``, is made (names and tracks). Unnamed markers stand at their predictions pred (8, 3) for the
         comparison (none without one). A hand passing its shoulder can leave the two names the
         other way round, each a plausible distance from the other markers, so no rigid length
         tells; the pose they make (a shoulder in front of the chest, the arm folded through it)
         is one no body in the database takes. out (8, 3), assign, arow (8,) in place."""
         cfg = self.config
+        if t - self._t_fit < cfg.fit_interval - 1e-6:
+            return
+        self._t_fit = t
         base = np.where((assign >= 0)[:, None], out, pred)
         if self.pose_fit is None or not math.isfinite(cfg.fit_swap_s) or not np.isfinite(base).all():
             self._fit_swap = None
