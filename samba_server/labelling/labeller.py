@@ -562,8 +562,8 @@ class Labeller:
         legs, a knee and its ankle, a wrist and the other shoulder, the mirror image) of markers
         named on points: a swap that brings the markers within ``fit_swap_ratio`` of their
         distance to the nearest body, the same swap at every check (each ``fit_interval``) for
-        ``fit_swap_s``, is made (names and tracks). Unnamed markers stand at their predictions pred (8, 3) for the
-        comparison (none without one). A hand passing its shoulder can leave the two names the
+        ``fit_swap_s``, is made (names and tracks). Unnamed markers stand at their predictions
+        pred (8, 3) for the comparison (none without one). A hand passing its shoulder can leave the two names the
         other way round, each a plausible distance from the other markers, so no rigid length
         tells; the pose they make (a shoulder in front of the chest, the arm folded through it)
         is one no body in the database takes. out (8, 3), assign, arow (8,) in place."""
