@@ -1,10 +1,11 @@
 """Multi-view triangulation: undistort, linear solve, Gauss-Newton refinement, outlier views.
 
-All arrays are vectorised over points (the server calls this once per frame for 8 markers
-from 2-4 cameras). Pixels are raw camera pixels (with lens distortion); NaN means "not seen".
+The server calls this several times per frame (the labelling stage's candidate points, a few
+dozen from 2-4 cameras), so steps 2-4 run in one compiled (numba) loop over the points: 85 us
+for 88 points in 4 views, of which 30 us is the fixed cost of a call. Pixels are raw camera pixels (with lens distortion); NaN means "not seen".
 
 Pipeline per frame:
-1. undistort every view to ideal normalised coordinates (Newton, vectorised over cameras);
+1. undistort every view to ideal normalised coordinates (a bilinear table per camera);
 2. linear least squares (the inhomogeneous form of DLT) from all views of each point;
 3. Gauss-Newton on the reprojection error in pixels (analytic Jacobian, 3x3 normal
    equations per point);
@@ -20,9 +21,11 @@ Samba lenses.
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from samba_common.calib import CameraRig
 
@@ -70,11 +73,7 @@ class TriangulationResult:
 
 
 class Triangulator:
-    """Triangulation for one rig, with the rig's arrays precomputed (use this per frame).
-
-    Internally observations are kept as normalised coordinates ``xy`` of shape (2, C, M)
-    (x then y), which keeps the number of numpy calls per frame small.
-    """
+    """Triangulation for one rig, with the rig's arrays precomputed (use this per frame)."""
 
     _LUT_PAD = 8  # pixels of table beyond each image border
 
@@ -90,15 +89,7 @@ class Triangulator:
         self.R = np.stack([c.R for c in cams])  # (C,3,3)
         self.t = np.stack([c.tvec for c in cams])  # (C,3)
         self.has_dist = bool(np.any(self.dist != 0))
-        # (2, C, 1, 3): rows 1 and 2 of R; (C, 1, 3): row 3
-        self._R01 = self.R[:, :2, :].transpose(1, 0, 2)[:, :, None, :].copy()
-        self._R2 = self.R[:, None, 2, :].copy()
-        self._t01 = self.t[:, :2].T[:, :, None].copy()  # (2, C, 1)
-        self._t2 = self.t[:, 2, None].copy()  # (C, 1)
-        self._f = np.stack([self.K[:, 0, 0], self.K[:, 1, 1]])[:, :, None]  # (2, C, 1)
-        self._c = np.stack([self.K[:, 0, 2], self.K[:, 1, 2]])[:, :, None]  # (2, C, 1)
-        self._skew = self.K[:, 0, 1, None]  # (C, 1)
-        self._eps3 = 1e-12 * np.eye(3)
+        self._fxy = np.ascontiguousarray(np.stack([self.K[:, 0, 0], self.K[:, 1, 1]], axis=1))  # (C, 2) px
         if self.has_dist:
             self._build_lut()
 
@@ -173,52 +164,25 @@ class Triangulator:
         out[~seen] = np.nan
         return out
 
-    # ------------------------------------------------------------------ solver pieces
-    def _linear(self, xy: np.ndarray, w: np.ndarray) -> np.ndarray:
-        """xy (2, C, M) normalised (0 where unseen), w (C, M) 1/0 -> (M, 3) points.
-
-        Linear least squares on rows (x r3 - r1) X = t1 - x t3 (and y), the DLT with the
-        homogeneous coordinate fixed to 1."""
-        A = (xy[..., None] * self._R2 - self._R01) * w[..., None]  # (2,C,M,3)
-        b = (self._t01 - xy * self._t2) * w  # (2,C,M)
-        C2, M = 2 * self.C, xy.shape[2]
-        At = A.reshape(C2, M, 3).transpose(1, 2, 0)  # (M,3,2C)
-        return np.linalg.solve(At @ At.transpose(0, 2, 1) + self._eps3, At @ b.reshape(C2, M).T[..., None])[..., 0]
-
-    def _project(self, X: np.ndarray):
-        """X (M, 3) -> normalised projections p (2, C, M) and inverse depth (C, M)."""
-        Xc = self.R @ X.T + self.t[:, :, None]  # (C,3,M)
-        iz = 1.0 / Xc[:, 2]
-        return (Xc[:, :2] * iz[:, None]).transpose(1, 0, 2), iz
-
-    def _refine(self, X: np.ndarray, xy: np.ndarray, fw: np.ndarray, iterations: int) -> np.ndarray:
-        """Gauss-Newton on the pixel reprojection error with the analytic Jacobian.
-
-        X (M, 3); xy (2, C, M); fw (2, C, M) focal length times view weight -> X (M, 3)."""
-        C2, M = 2 * self.C, xy.shape[2]
-        for _ in range(iterations):
-            p, iz = self._project(X)
-            r = (p - xy) * fw  # (2,C,M) pixels
-            # d(f p_k)/dX = f/z (r_k - p_k r3)
-            J = (self._R01 - p[..., None] * self._R2) * (fw * iz)[..., None]
-            Jt = J.reshape(C2, M, 3).transpose(1, 2, 0)  # (M,3,2C)
-            X = X - np.linalg.solve(Jt @ Jt.transpose(0, 2, 1) + self._eps3, Jt @ r.reshape(C2, M).T[..., None])[..., 0]
-        return X
-
-    def _solve(self, xy: np.ndarray, w: np.ndarray, n: np.ndarray):
-        """Points from the views with w = 1 (n = w.sum(0) views each) -> X (M, 3),
-        per-view error (C, M) px, rms (M,) px (inf if behind a camera that saw it)."""
-        X = self._linear(xy, w)
-        fw = self._f * w
-        cfg = self.config
-        if cfg.refine and cfg.iterations:
-            X = self._refine(X, xy, fw, cfg.iterations)
-        p, iz = self._project(X)
-        r = (p - xy) * fw
-        e2 = r[0] * r[0] + r[1] * r[1]
-        e2[iz * w < 0.0] = np.inf  # behind a camera that saw it: unusable
-        rms = np.sqrt(e2.sum(axis=0) / n)
-        return X, np.sqrt(e2), rms
+    def project(self, X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World points (N, 3) m -> pixels (C, N, 2) in every camera, with distortion (NaN
+        behind a camera), and depth (C, N) m: :meth:`Camera.project` for the whole rig at once."""
+        Xc = np.matmul(X, self.R.transpose(0, 2, 1)) + self.t[:, None, :]  # (C, N, 3)
+        z = Xc[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x, y = Xc[..., 0] / z, Xc[..., 1] / z
+        behind = ~(z > 1e-9)
+        x[behind] = np.nan
+        y[behind] = np.nan
+        if self.has_dist:
+            k1, k2, p1, p2, k3 = (self.dist[:, i, None] for i in range(5))
+            r2 = x * x + y * y
+            rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+            x, y = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x), y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+        K = self.K
+        u = K[:, 0, 0, None] * x + K[:, 0, 1, None] * y + K[:, 0, 2, None]
+        v = K[:, 1, 1, None] * y + K[:, 1, 2, None]
+        return np.stack([u, v], axis=-1), z
 
     # ------------------------------------------------------------------ public
     def triangulate(self, uv: np.ndarray) -> TriangulationResult:
@@ -242,37 +206,11 @@ class Triangulator:
                                            np.zeros(N, dtype=int), np.zeros_like(mask))
             idx = np.flatnonzero(ok)
             mask, xyn, nseen = mask[:, idx], xyn[:, :, idx], nseen[idx]
-        w = mask.astype(float)
-        xy = np.where(mask, xyn, 0.0)  # (2,C,M)
-        n = nseen.astype(float)
-        X, e, rms = self._solve(xy, w, n)
-        # outlier views: leave-one-out while >= 3 views and the worst view is too far off
-        it = 0
-        while it < C - 2 and e.max() > cfg.max_error_px:
-            it += 1
-            bad = (e.max(axis=0) > cfg.max_error_px) & (n > max(2, cfg.min_views))
-            if not bad.any():
-                break
-            b = np.flatnonzero(bad)
-            nb = len(b)
-            cw = np.repeat(w[:, b][None], C, axis=0)  # (C_drop, C, nb)
-            cw[np.arange(C), np.arange(C), :] = 0.0
-            cw = cw.transpose(1, 0, 2).reshape(C, C * nb)
-            cX, ce, crms = self._solve(np.tile(xy[:, :, b], (1, 1, C)), cw, np.tile(n[b] - 1.0, C))
-            valid = w[:, b] > 0  # (C_drop, nb): dropping a view only counts if it was used
-            crms = np.where(valid, crms.reshape(C, nb), np.inf)
-            best = np.argmin(crms, axis=0)
-            cols = np.arange(nb)
-            improve = crms[best, cols] < rms[b]
-            if not improve.any():
-                break
-            bi = b[improve]
-            si = (best * nb + cols)[improve]
-            X[bi] = cX[si]
-            e[:, bi] = ce[:, si]
-            rms[bi] = crms[best[improve], cols[improve]]
-            w[:, bi] = cw[:, si]
-            n[bi] -= 1.0
+        xy = np.ascontiguousarray(np.where(mask, xyn, 0.0).transpose(2, 1, 0))  # (M, C, 2)
+        w = np.ascontiguousarray(mask.T)  # (M, C)
+        X, rms = _triangulate_points(xy, w, self.R, self.t, self._fxy, cfg.max_error_px,
+                                     cfg.iterations if cfg.refine else 0, max(2, cfg.min_views))
+        w, n = w.T, w.sum(axis=1)
         if all_ok and rms.max() < np.inf:
             return TriangulationResult(X, rms, n.astype(int), w > 0)
         good = rms < np.inf
@@ -286,6 +224,134 @@ class Triangulator:
         n_used[out_idx] = n[good].astype(int)
         used[:, out_idx] = w[:, good] > 0
         return TriangulationResult(points, error, n_used, used)
+
+
+# --------------------------------------------------------------------------- compiled solver
+@njit(cache=True)
+def _solve_sym3(A: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
+    """out (3,) = A^-1 b for a symmetric positive definite A (3, 3) (adjugate / determinant)."""
+    c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[1, 2]
+    c01 = A[0, 2] * A[1, 2] - A[0, 1] * A[2, 2]
+    c02 = A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]
+    c11 = A[0, 0] * A[2, 2] - A[0, 2] * A[0, 2]
+    c12 = A[0, 1] * A[0, 2] - A[0, 0] * A[1, 2]
+    c22 = A[0, 0] * A[1, 1] - A[0, 1] * A[0, 1]
+    idet = 1.0 / (A[0, 0] * c00 + A[0, 1] * c01 + A[0, 2] * c02)
+    out[0] = (c00 * b[0] + c01 * b[1] + c02 * b[2]) * idet
+    out[1] = (c01 * b[0] + c11 * b[1] + c12 * b[2]) * idet
+    out[2] = (c02 * b[0] + c12 * b[1] + c22 * b[2]) * idet
+
+
+@njit(cache=True)
+def _solve_views(xy: np.ndarray, w: np.ndarray, R: np.ndarray, t: np.ndarray, f: np.ndarray, iterations: int,
+                 X: np.ndarray, e: np.ndarray) -> float:
+    """One point from the views with w True: xy (C, 2) ideal normalised coordinates; R (C, 3, 3),
+    t (C, 3) world -> camera; f (C, 2) focal lengths px. Linear least squares (rows
+    (x r3 - r1) X = t1 - x t3 and the same in y: the DLT with the homogeneous coordinate fixed
+    to 1), then ``iterations`` Gauss-Newton steps on the pixel error with the analytic
+    Jacobian. Writes X (3,) world m and e (C,) px per view (0 unused, inf behind a camera that
+    saw it); returns the rms px over the used views."""
+    C = xy.shape[0]
+    A = np.zeros((3, 3))
+    b = np.zeros(3)
+    row = np.zeros(3)
+    for c in range(C):
+        if not w[c]:
+            continue
+        for k in range(2):
+            rhs = t[c, k] - xy[c, k] * t[c, 2]
+            for i in range(3):
+                row[i] = xy[c, k] * R[c, 2, i] - R[c, k, i]
+            for i in range(3):
+                b[i] += row[i] * rhs
+                for j in range(3):
+                    A[i, j] += row[i] * row[j]
+    for i in range(3):
+        A[i, i] += 1e-12
+    _solve_sym3(A, b, X)
+    step = np.zeros(3)
+    for _ in range(iterations):
+        A[:] = 0.0
+        b[:] = 0.0
+        for c in range(C):
+            if not w[c]:
+                continue
+            zc = R[c, 2, 0] * X[0] + R[c, 2, 1] * X[1] + R[c, 2, 2] * X[2] + t[c, 2]
+            iz = 1.0 / zc
+            for k in range(2):
+                p = (R[c, k, 0] * X[0] + R[c, k, 1] * X[1] + R[c, k, 2] * X[2] + t[c, k]) * iz
+                r = (p - xy[c, k]) * f[c, k]
+                for i in range(3):
+                    row[i] = (R[c, k, i] - p * R[c, 2, i]) * f[c, k] * iz
+                for i in range(3):
+                    b[i] += row[i] * r
+                    for j in range(3):
+                        A[i, j] += row[i] * row[j]
+        for i in range(3):
+            A[i, i] += 1e-12
+        _solve_sym3(A, b, step)
+        for i in range(3):
+            X[i] -= step[i]
+    total, n = 0.0, 0
+    for c in range(C):
+        e[c] = 0.0
+        if not w[c]:
+            continue
+        n += 1
+        zc = R[c, 2, 0] * X[0] + R[c, 2, 1] * X[1] + R[c, 2, 2] * X[2] + t[c, 2]
+        if not zc > 0.0:
+            e[c] = np.inf
+        else:
+            e2 = 0.0
+            for k in range(2):
+                p = (R[c, k, 0] * X[0] + R[c, k, 1] * X[1] + R[c, k, 2] * X[2] + t[c, k]) / zc
+                r = (p - xy[c, k]) * f[c, k]
+                e2 += r * r
+            e[c] = math.sqrt(e2)
+        total += e[c] * e[c]
+    return math.sqrt(total / n)
+
+
+@njit(cache=True)
+def _triangulate_points(xy: np.ndarray, w: np.ndarray, R: np.ndarray, t: np.ndarray, f: np.ndarray,
+                        max_error_px: float, iterations: int, min_drop: int) -> tuple[np.ndarray, np.ndarray]:
+    """Points from xy (M, C, 2) ideal normalised coordinates seen where w (M, C) bool (>= 2
+    views each; w is updated to the views used). A point with more than ``min_drop`` views whose
+    worst view is off by more than ``max_error_px`` is solved again without each view in turn;
+    the best subset is kept when its rms is lower, repeated while that holds. Returns X (M, 3)
+    world m and rms (M,) px (inf: behind a camera that saw it)."""
+    M, C = w.shape
+    X = np.empty((M, 3))
+    rms = np.empty(M)
+    e = np.empty(C)
+    cX = np.empty(3)
+    ce = np.empty(C)
+    for m in range(M):
+        rms[m] = _solve_views(xy[m], w[m], R, t, f, iterations, X[m], e)
+        n = 0
+        for c in range(C):
+            n += w[m, c]
+        for _ in range(C - 2):
+            worst = 0.0
+            for c in range(C):
+                worst = max(worst, e[c])
+            if n <= min_drop or not worst > max_error_px:
+                break
+            best, best_rms = -1, np.inf
+            for d in range(C):
+                if not w[m, d]:
+                    continue
+                w[m, d] = False
+                r = _solve_views(xy[m], w[m], R, t, f, iterations, cX, ce)
+                w[m, d] = True
+                if r < best_rms:
+                    best, best_rms = d, r
+            if best < 0 or not best_rms < rms[m]:
+                break
+            w[m, best] = False
+            n -= 1
+            rms[m] = _solve_views(xy[m], w[m], R, t, f, iterations, X[m], e)
+    return X, rms
 
 
 def triangulate(

@@ -309,7 +309,7 @@ class Labeller:
         assign = np.where(arow >= 0, row_pt[np.maximum(arow, 0)], -1)
         # a marker left out whose prediction sits by a named neighbour's point, close to that
         # neighbour's prediction, is in the same blob in every view: it shares the point
-        free = np.setdiff1d(np.arange(P), assign[assign >= 0])
+        free = np.flatnonzero(np.bincount(assign[assign >= 0], minlength=P) == 0)
         for n in np.flatnonzero((assign < 0) & np.isfinite(pred).all(axis=1)):
             if free.size and np.min(np.linalg.norm(pts.X[free] - pred[n], axis=1)) <= gate[n] + 0.1:
                 continue  # a point of its own may be there: no sharing
@@ -372,12 +372,9 @@ class Labeller:
         named = np.flatnonzero(assign >= 0)
         margin = float("nan")
         if named.size:
-            gaps = []
-            for m in named:
-                col = np.where(ok[:, m] & (row_pt != assign[m]), cost[:, m], np.inf)
-                runner = min(float(np.min(col)), float(gate[m]))
-                gaps.append(runner - cost[arow[m], m])
-            margin = float(min(gaps))
+            rival = np.where(ok[:, named] & (row_pt[:, None] != assign[named]), cost[:, named], np.inf)
+            runner = np.minimum(rival.min(axis=0), gate[named])
+            margin = float(np.min(runner - cost[arow[named], named]))
         over = int(sum(1 for m in named if pts.votes[assign[m]].sum() > pts.votes[assign[m], m]))
         self.stats.overridden += over
         resid = float(np.sqrt(np.mean(d_eff[arow[named], named] ** 2))) if named.size else float("nan")

@@ -7,8 +7,9 @@ Per frame (:func:`reconstruct_points`):
    (both ways; a merged blob gets its radius more, its centroid lies between two markers) is
    a candidate, triangulated from the two views and kept if it lies in front of both cameras
    inside the capture volume;
-3. each candidate is projected into every other view and takes the nearest blob within
-   ``support_px`` (plus the radius of a merged blob), then is triangulated again from all its
+3. each candidate is projected into every view and takes the nearest blob within
+   ``support_px`` (plus the radius of a merged blob); candidates that took the same blobs
+   (one marker found by several camera pairs) are one point, triangulated again from all its
    views (views off by more than the triangulator's ``max_error_px`` are dropped when >= 3);
 4. the candidates are accepted greedily, best first (more views, fewer *unexplained* views,
    smaller error; a 2-view candidate more than ``body_radius_m`` from the >= 3-view ones
@@ -26,8 +27,9 @@ no blob is there (a merged blob near it explains it): the marker is hidden (the 
 of the volume) or the point is a ghost. Points seen by >= 3 views are not ghosts; 2-view points
 carry their unexplained count so that the naming stage can trust them less.
 
-Cost: one vectorised pass per camera pair over (N_a x N_b) blobs and one triangulation of all
-candidates, so 20 blobs per view in 4 views stays near a millisecond.
+Cost: one vectorised pass per camera pair over (N_a x N_b) blobs and two compiled
+triangulations (the pair candidates, then the points), so 20 blobs per view in 4 views stays
+near a millisecond.
 """
 
 from __future__ import annotations
@@ -98,6 +100,25 @@ class Points3D:
                         np.zeros(0, bool), np.zeros(0, np.int64), np.zeros(0, bool))
 
 
+def _nanmedian_columns(a: np.ndarray) -> np.ndarray:
+    """np.nanmedian(a, axis=0) of a small (R, N) array (NaN where a column has no value), many
+    times faster than numpy's general routine."""
+    s = np.sort(a, axis=0)  # NaN last
+    n = np.count_nonzero(np.isfinite(a), axis=0)
+    cols = np.arange(a.shape[1])
+    lo, hi = s[np.maximum(n - 1, 0) // 2, cols], s[n // 2, cols]
+    return np.where(n > 0, 0.5 * (lo + hi), np.nan)
+
+
+def _blob_capacity(blob: np.ndarray, views: list[ViewBlobs]) -> np.ndarray:
+    """(C, P) markers the blob of each point in each view may stand for (0: no blob there)."""
+    out = np.zeros(blob.shape, np.int64)
+    for c, v in enumerate(views):
+        has = blob[c] >= 0
+        out[c, has] = v.capacity[blob[c, has]]
+    return out
+
+
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
@@ -132,6 +153,7 @@ class PointReconstructor:
         """Points of one frame from per-view blobs (rig order; empty ViewBlobs for a missing view)."""
         cfg, C = self.config, self.C
         xy = self._normalised(views)
+        hom = [np.concatenate([x, np.ones((len(x), 1))], axis=1) for x in xy]
         extra = [np.where(v.capacity > 1, cfg.merged_px_per_radius * v.radius, 0.0) for v in views]
         cand_a: list[np.ndarray] = []
         cand_b: list[np.ndarray] = []
@@ -139,8 +161,7 @@ class PointReconstructor:
         for a, b, E in self.pairs:
             if len(views[a]) == 0 or len(views[b]) == 0:
                 continue
-            ha = np.c_[xy[a], np.ones(len(xy[a]))]
-            hb = np.c_[xy[b], np.ones(len(xy[b]))]
+            ha, hb = hom[a], hom[b]
             lb = ha @ E.T          # (Na, 3) lines in b
             la = hb @ E            # (Nb, 3) lines in a
             alg = hb @ lb.T        # (Nb, Na) = x_b^T E x_a
@@ -166,76 +187,95 @@ class PointReconstructor:
             sel = cams_arr[:, 1] == c
             if sel.any():
                 uv[c, sel] = views[c].uv[jb_all[sel]]
-        X = self.tri.triangulate(uv).points
-        ok = self._plausible(X)
+        pair = self.tri.triangulate(uv)
+        ok = self._plausible(pair.points)
         if not ok.any():
             return Points3D.empty(C)
-        X, uv, cams_arr = X[ok], uv[:, ok], cams_arr[ok]
+        X = pair.points[ok]
         K = len(X)
+        pair_blob = np.full((C, len(ok)), -1, np.int64)  # each candidate's two blobs
+        pair_blob[cams_arr[:, 0], np.arange(len(ok))] = ia_all
+        pair_blob[cams_arr[:, 1], np.arange(len(ok))] = jb_all
+        pair_blob = pair_blob[:, ok]
         blob = np.full((C, K), -1, np.int64)
-        inside = np.zeros((C, K), bool)
         # the view's nearest blob is merged: if the triangulation drops it (its centroid lies
         # between two markers) it still explains the view, the marker is in it, not missing
         in_merged = np.zeros((C, K), bool)
+        proj, depth = self.tri.project(X)  # (C, K, 2), (C, K)
+        size = np.array([c.size for c in self.rig.cameras], float)[:, None, :] - 1.0  # (C, 1, 2)
+        inside = (depth > 0.1) & (proj >= 0).all(axis=2) & (proj <= size).all(axis=2)
         for c in range(C):
-            cam = self.rig.cameras[c]
-            proj = cam.project(X)
-            depth = cam.to_camera(X)[:, 2]
-            w, h = cam.size
-            inside[c] = (depth > 0.1) & (proj[:, 0] >= 0) & (proj[:, 0] <= w - 1) & (proj[:, 1] >= 0) & (proj[:, 1] <= h - 1)
             v = views[c]
             if len(v) == 0:
                 continue
-            d = np.linalg.norm(proj[:, None, :] - v.uv[None, :, :], axis=2)  # (K, N)
+            d = np.linalg.norm(proj[c, :, None, :] - v.uv[None, :, :], axis=2)  # (K, N)
             d -= extra[c][None, :]
             d[~np.isfinite(d)] = np.inf
             near = np.argmin(d, axis=1)
-            good = (d[np.arange(K), near] <= cfg.support_px) & (depth > 0.1)
+            good = (d[np.arange(K), near] <= cfg.support_px) & (depth[c] > 0.1)
             blob[c, good] = near[good]
             in_merged[c, good] = v.capacity[near[good]] > 1
-            uv[c] = np.nan
-            uv[c, good] = v.uv[near[good]]
-        res = self.tri.triangulate(uv)
-        used = res.used & (blob >= 0)
+        # candidates from different camera pairs that took the same blobs are one point: keep
+        # the first of each (the same views give the same triangulation)
+        ids: dict[tuple, int] = {}  # blobs -> group, numbered in order of their first candidate
+        group = np.array([ids.setdefault(tuple(r), len(ids)) for r in blob.T.tolist()], np.int64)
+        _, first, counts = np.unique(group, return_index=True, return_counts=True)
+        blob, in_merged = blob[:, first], in_merged[:, first]
+        uv = np.full((C, len(first), 2), np.nan)
+        for c in range(C):
+            good = blob[c] >= 0
+            uv[c, good] = views[c].uv[blob[c, good]]
+        # a point on just its candidate's two blobs is that candidate's triangulation (most
+        # ghosts): only the others are triangulated again
+        X, err, used = X[first], pair.error[ok][first], blob >= 0
+        again = np.flatnonzero((blob != pair_blob[:, first]).any(axis=0))
+        if len(again):
+            res = self.tri.triangulate(uv[:, again])
+            X[again], err[again], used[:, again] = res.points, res.error, res.used
+        used &= blob >= 0
         blob = np.where(used, blob, -1)
-        X, err, n_views = res.points, res.error, used.sum(axis=0)
+        n_views = used.sum(axis=0)
         ok = (n_views >= 2) & self._plausible(X)
-        # greedy acceptance, best first
-        missing = (inside & (blob < 0) & ~in_merged).sum(axis=0)
+        # views in whose image a point falls with no blob (the fewest over the candidates that
+        # make the point: their pair triangulations differ a little)
+        missing = np.full(len(first), C, np.int64)
+        np.minimum.at(missing, group, (inside & (blob[:, group] < 0) & ~in_merged[:, group]).sum(axis=0))
         # a 2-view candidate far from the body (a distractor's blob with a marker's, where no
         # other camera looks) ranks as if two more views missed it: it stole a marker's blob
         far = np.zeros(len(X), bool)
         sure = ok & (n_views >= 3)
-        if np.count_nonzero(sure) >= 3:
-            centre = np.median(X[sure, :2], axis=0)
+        if counts[sure].sum() >= 3:
+            # the body's centre: median over the candidates (a point counts once per camera
+            # pair that found it, so the points more views see weigh more)
+            centre = np.median(np.repeat(X[sure, :2], counts[sure], axis=0), axis=0)
             far = (n_views < 3) & (np.linalg.norm(np.nan_to_num(X[:, :2]) - centre, axis=1) > cfg.body_radius_m)
+        # greedy acceptance, best first
         order = np.lexsort((np.nan_to_num(err, nan=1e9), missing + 2 * far, -n_views))
-        cap = [v.capacity.copy() for v in views]
-        seen: set[tuple] = set()
+        capl = [v.capacity.tolist() for v in views]  # markers each blob may still give
+        rows, okl = blob.T.tolist(), ok.tolist()  # plain lists: this loop visits every candidate
         keep: list[int] = []
-        for k in order:
-            if not ok[k]:
+        for k in order.tolist():
+            if not okl[k]:
                 continue
-            sig = tuple(blob[:, k])
-            if sig in seen:
-                continue
-            seen.add(sig)
-            cs = np.flatnonzero(blob[:, k] >= 0)
-            taken = [c for c in cs if cap[c][blob[c, k]] <= 0]
+            row = rows[k]
+            cs = [c for c in range(C) if row[c] >= 0]
+            taken = [c for c in cs if capl[c][row[c]] <= 0]
             if taken:
                 # a hidden marker projects onto the blob of the marker in front of it: the
                 # view is explained, but its blob is the other point's. Keep the point from
                 # its own views when >= 2 are left.
                 if len(cs) - len(taken) < 2 or not self._reduce(k, taken, X, err, n_views, blob, uv):
                     continue
-                cs = np.flatnonzero(blob[:, k] >= 0)
+                row = blob[:, k].tolist()
+                cs = [c for c in range(C) if row[c] >= 0]
             if keep and np.min(np.linalg.norm(X[keep] - X[k], axis=1)) < cfg.min_separation_m:
                 continue
             for c in cs:
-                cap[c][blob[c, k]] -= 1
-            keep.append(int(k))
+                capl[c][row[c]] -= 1
+            keep.append(k)
             if len(keep) >= cfg.max_points:
                 break
+        cap = [np.array(c, np.int64) for c in capl]
         if not keep:
             return Points3D.empty(C)
         idx = np.array(keep)
@@ -248,6 +288,7 @@ class PointReconstructor:
         votes = np.zeros((len(idx), 8), np.int64)
         n_merged = np.zeros(len(idx), np.int64)
         size = np.full((C, len(idx)), np.nan)  # blob area x (depth / f)^2: m^2, the marker's apparent size
+        depth = self.tri.project(X[idx])[1]  # (C, P) m
         for c in range(C):
             has = blob[c] >= 0
             if not has.any():
@@ -257,12 +298,11 @@ class PointReconstructor:
             lab = hint >= 0
             np.add.at(votes, (rows[lab], hint[lab]), 1)
             n_merged[rows] += views[c].capacity[blob[c, has]] > 1
-            depth = self.rig.cameras[c].to_camera(X[idx[rows]])[:, 2]
-            size[c, rows] = np.pi * views[c].radius[blob[c, has]] ** 2 * (depth / self.f[c]) ** 2
+            size[c, rows] = np.pi * views[c].radius[blob[c, has]] ** 2 * (depth[c, rows] / self.f[c]) ** 2
         merged_all = np.zeros(len(idx), bool)
         solid = n_views[idx] >= 3  # the reference size comes from points that are surely markers
         if solid.sum() >= 4:
-            med = np.nanmedian(size, axis=0)
+            med = _nanmedian_columns(size)
             ref = med[solid]
             ref = ref[np.isfinite(ref)]
             if ref.size:
@@ -276,7 +316,8 @@ class PointReconstructor:
         """A blob used by two accepted points seen in >= 3 views each is two markers merged: its
         centroid lies between them and would pull both towards each other. Such points are
         triangulated again without it (the blob stays theirs for the naming stage)."""
-        for c in range(self.C):
+        srt = np.sort(blob[:, idx], axis=1)
+        for c in np.flatnonzero(((srt[:, 1:] == srt[:, :-1]) & (srt[:, 1:] >= 0)).any(axis=1)):
             b = blob[c, idx]
             vals, counts = np.unique(b[b >= 0], return_counts=True)
             for v in vals[counts > 1]:
@@ -300,10 +341,10 @@ class PointReconstructor:
         returns (len(idx),) bool, the mirrored points."""
         out = np.zeros(len(idx), bool)
         proj: dict[int, np.ndarray] = {}
-        for r, k in enumerate(idx):
+        capb = _blob_capacity(blob[:, idx], views)
+        for r in np.flatnonzero((capb != 1).all(axis=0) & (capb > 1).any(axis=0)):
+            k = idx[r]
             cs = np.flatnonzero(blob[:, k] >= 0)
-            if not all(views[c].capacity[blob[c, k]] > 1 for c in cs):
-                continue
             inside = np.ones(len(idx), bool)
             inside[r] = False
             for c in cs:
@@ -343,13 +384,11 @@ class PointReconstructor:
         cfg = self.config
         parted = np.zeros(len(idx), bool)
         new: list[tuple[int, np.ndarray, int, int]] = []  # (k, X of the second, view, its blob)
-        for r, k in enumerate(idx):
-            cs = np.flatnonzero(blob[:, k] >= 0)
-            merged = [c for c in cs if views[c].capacity[blob[c, k]] > 1]
-            single = [c for c in cs if views[c].capacity[blob[c, k]] <= 1]
-            if len(merged) < 2 or len(single) != 1:
-                continue
-            c = single[0]
+        capb = _blob_capacity(blob[:, idx], views)
+        for r in np.flatnonzero(((capb > 1).sum(axis=0) >= 2) & ((capb == 1).sum(axis=0) == 1)):
+            k = idx[r]
+            merged = list(np.flatnonzero(capb[:, r] > 1))
+            c = int(np.flatnonzero(capb[:, r] == 1)[0])
             v = views[c]
             d = np.linalg.norm(v.uv - v.uv[blob[c, k]], axis=1)
             free = np.flatnonzero((d > 0) & (d <= cfg.part_px) & (cap[c] > 0) & (v.capacity <= 1))
