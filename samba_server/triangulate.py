@@ -92,6 +92,9 @@ class Triangulator:
         self._fxy = np.ascontiguousarray(np.stack([self.K[:, 0, 0], self.K[:, 1, 1]], axis=1))  # (C, 2) px
         if self.has_dist:
             self._build_lut()
+        # compile the solver (the first run on a machine) or load it from disk now, not on the
+        # first live frame
+        _triangulate_points(np.zeros((1, self.C, 2)), np.ones((1, self.C), bool), self.R, self.t, self._fxy, 1.0, 1, 2)
 
     # ------------------------------------------------------------------ undistortion
     def undistort_normalized_exact(self, uv: np.ndarray) -> np.ndarray:
@@ -208,8 +211,8 @@ class Triangulator:
             mask, xyn, nseen = mask[:, idx], xyn[:, :, idx], nseen[idx]
         xy = np.ascontiguousarray(np.where(mask, xyn, 0.0).transpose(2, 1, 0))  # (M, C, 2)
         w = np.ascontiguousarray(mask.T)  # (M, C)
-        X, rms = _triangulate_points(xy, w, self.R, self.t, self._fxy, cfg.max_error_px,
-                                     cfg.iterations if cfg.refine else 0, max(2, cfg.min_views))
+        X, rms = _triangulate_points(xy, w, self.R, self.t, self._fxy, float(cfg.max_error_px),
+                                     int(cfg.iterations) if cfg.refine else 0, max(2, int(cfg.min_views)))
         w, n = w.T, w.sum(axis=1)
         if all_ok and rms.max() < np.inf:
             return TriangulationResult(X, rms, n.astype(int), w > 0)
