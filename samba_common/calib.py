@@ -34,6 +34,7 @@ __all__ = [
     "UNITS_TO_METRES",
     "CameraRig",
     "default_rig",
+    "distort",
     "look_at",
     "rodrigues",
     "rotation_to_rvec",
@@ -66,6 +67,15 @@ def rodrigues(rvec: np.ndarray) -> np.ndarray:
     a = math.sin(theta) / theta
     b = (1.0 - math.cos(theta)) / (theta * theta)
     return np.eye(3) + a * K + b * (K @ K)
+
+
+def distort(x: np.ndarray, y: np.ndarray, k1, k2, p1, p2, k3) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's lens model: ideal normalised coordinates x, y -> distorted ones. The
+    coefficients are scalars or arrays that broadcast with x (one per camera of a rig)."""
+    r2 = x * x + y * y
+    rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    return (x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+            y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y)
 
 
 def rotation_to_rvec(R: np.ndarray) -> np.ndarray:
@@ -168,13 +178,7 @@ class Camera:
 
     def distort_normalized(self, xy: np.ndarray) -> np.ndarray:
         """Ideal normalised coordinates (N, 2) -> distorted normalised coordinates (N, 2)."""
-        k1, k2, p1, p2, k3 = self.dist[:5]
-        x, y = xy[:, 0], xy[:, 1]
-        r2 = x * x + y * y
-        rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        xd = x * rad + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
-        yd = y * rad + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
-        return np.stack([xd, yd], axis=-1)
+        return np.stack(distort(xy[:, 0], xy[:, 1], *self.dist[:5]), axis=-1)
 
     def project(self, X: np.ndarray) -> np.ndarray:
         """World points (N, 3) metres -> pixels (N, 2) with distortion; NaN behind the camera."""

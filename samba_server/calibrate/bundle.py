@@ -22,7 +22,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse import coo_matrix
 
-from samba_common.calib import Camera, rotation_to_rvec
+from samba_common.calib import Camera, distort, rotation_to_rvec
 
 log = logging.getLogger(__name__)
 
@@ -47,11 +47,7 @@ def project_obs(rvec: np.ndarray, tvec: np.ndarray, K: np.ndarray, dist: np.ndar
     z = np.where(np.abs(z) < 1e-9, 1e-9, z)
     xy = Xc[:, :2] / z
     x, y = xy[:, 0], xy[:, 1]
-    k1, k2, p1, p2, k3 = dist.T
-    r2 = x * x + y * y
-    rad = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = x * rad + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-    yd = y * rad + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+    xd, yd = distort(x, y, *dist.T)
     u = K[:, 0, 0] * xd + K[:, 0, 1] * yd + K[:, 0, 2]
     v = K[:, 1, 1] * yd + K[:, 1, 2]
     return np.stack([u, v], axis=1)
