@@ -1,15 +1,15 @@
 """Cost of the server's marker labelling as clutter grows: 0-30 static distractors per view.
 
 The live server's own processing (packets -> sync -> labelling -> solve), in process and
-without the network, over the shipped demo take (standard pose, then 30 s of motion) seen by
-the default 4-camera rig, 60 fps. Each view gets N static distractor blobs (marker-sized,
+without the network, over the shipped demo take (the standard pose, then CMU 02_05, punch and
+strike; 576 frames) seen by the default 4-camera rig, 60 fps. Each view gets N static distractor blobs (marker-sized,
 unlabelled, at fixed random pixels: lamps, reflections) besides the markers. Per N: the
 labelling stage's time per frame (p50 / p99 / max, ms), the 3D points it keeps per frame, and
 how the markers came out (share of frames with every marker named within 5 cm of the truth,
 frames with a name more than 10 cm off). Issue 12 asks that the cost stay bounded with 20
 blobs per view. Records into docs/BENCHMARKS.md.
 
-    python benchmarks/clutter.py [--frames 1200] [--distractors 0 10 20 30] [--no-record]
+    python benchmarks/clutter.py [--frames N] [--distractors 0 10 20 30] [--no-record]
 """
 
 from __future__ import annotations
@@ -85,7 +85,7 @@ def run(n_distractors: int, frames: int, seed: int = 0) -> dict:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--frames", type=int, default=1200, help="frames of the demo take (60 fps)")
+    ap.add_argument("--frames", type=int, default=100_000, help="at most this many frames of the demo take")
     ap.add_argument("--distractors", type=int, nargs="+", default=[0, 10, 20, 30], help="distractors per view")
     ap.add_argument("--no-record", action="store_true", help="print only, do not write docs/BENCHMARKS.md")
     args = ap.parse_args()
@@ -102,8 +102,10 @@ def main() -> int:
     for r in rows:
         lines.append(f"| {r['distractors']} | {r['p50']:.2f} | {r['p99']:.2f} | {r['max']:.2f} | {r['points']:.1f} | "
                      f"{100 * r['right']:.1f} % | {r['wrong']} |")
-    lines += ["", "Issue 12: the cost must stay bounded with clutter (20 blobs per view); the 3D stage keeps at most "
-              "`max_points` (24) points per frame."]
+    lines += ["", "Issue 12: the cost must stay bounded with clutter (20 blobs per view). The 3D stage keeps at most "
+              "`max_points` (24) points per frame, so the median cost levels off; the p99 is the audit (a fresh "
+              "identification every 0.1 s while a sure point moves unnamed), whose enumeration grows with the points "
+              "(about 15-26 ms with 24 points, 3 % of frames at 20 distractors)."]
     print("\n".join(lines))
     if not args.no_record:
         from _record import record

@@ -228,7 +228,7 @@ class Triangulator:
 
 
 # --------------------------------------------------------------------------- compiled solver
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")  # IEEE results (inf, NaN), not exceptions
 def _solve_sym3(A: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
     """out (3,) = A^-1 b for a symmetric positive definite A (3, 3) (adjugate / determinant)."""
     c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[1, 2]
@@ -243,7 +243,7 @@ def _solve_sym3(A: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
     out[2] = (c02 * b[0] + c12 * b[1] + c22 * b[2]) * idet
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")  # IEEE results (inf, NaN), not exceptions
 def _solve_views(xy: np.ndarray, w: np.ndarray, R: np.ndarray, t: np.ndarray, f: np.ndarray, iterations: int,
                  X: np.ndarray, e: np.ndarray) -> float:
     """One point from the views with w True: xy (C, 2) ideal normalised coordinates; R (C, 3, 3),
@@ -313,7 +313,7 @@ def _solve_views(xy: np.ndarray, w: np.ndarray, R: np.ndarray, t: np.ndarray, f:
     return math.sqrt(total / n)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")  # IEEE results (inf, NaN), not exceptions
 def _triangulate_points(xy: np.ndarray, w: np.ndarray, R: np.ndarray, t: np.ndarray, f: np.ndarray,
                         max_error_px: float, iterations: int, min_drop: int) -> tuple[np.ndarray, np.ndarray]:
     """Points from xy (M, C, 2) ideal normalised coordinates seen where w (M, C) bool (>= 2

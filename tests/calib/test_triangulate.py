@@ -113,3 +113,13 @@ def test_single_camera_rig_gives_nan_not_an_error() -> None:
     assert np.isnan(res.points).all() and list(res.n_views) == [0, 0, 0]
     with pytest.raises(ValueError):
         Triangulator(CameraRig([]))
+
+
+def test_two_views_from_one_centre_give_nan_not_an_error() -> None:
+    """Two cameras at the same centre see a point along one ray: no depth, a NaN point (the
+    compiled solver returns IEEE results, it never raises on a singular system)."""
+    cam = Camera("a", (160, 120), [[140, 0, 80], [0, 140, 60], [0, 0, 1]], np.zeros(5), [0, 0, 0], [0, 0, 0])
+    rig = CameraRig([cam, Camera("b", cam.size, cam.matrix, np.zeros(5), [0, 0, 0], [0, 0, 0])])
+    res = Triangulator(rig).triangulate(np.array([[[80.0, 60.0], [90.0, 61.0]], [[80.0, 60.0], [90.0, 61.0]]]))
+    assert res.points.shape == (2, 3) and list(res.n_views) == [0, 0]
+    assert np.isnan(res.points).all()
