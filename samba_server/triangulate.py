@@ -229,8 +229,20 @@ class Triangulator:
 
 # --------------------------------------------------------------------------- compiled solver
 @njit(cache=True, error_model="numpy")  # IEEE results (inf, NaN), not exceptions
+def _add_row(A: np.ndarray, b: np.ndarray, row: np.ndarray, rhs: float) -> None:
+    """Add one least-squares row (row (3,) . X = rhs) to the normal equations A (3, 3), b (3,)."""
+    for i in range(3):
+        b[i] += row[i] * rhs
+        for j in range(3):
+            A[i, j] += row[i] * row[j]
+
+
+@njit(cache=True, error_model="numpy")  # IEEE results (inf, NaN), not exceptions
 def _solve_sym3(A: np.ndarray, b: np.ndarray, out: np.ndarray) -> None:
-    """out (3,) = A^-1 b for a symmetric positive definite A (3, 3) (adjugate / determinant)."""
+    """out (3,) = (A + 1e-12 I)^-1 b for a symmetric positive semi-definite A (3, 3) (adjugate /
+    determinant; the 1e-12 keeps a singular system finite where it can). A is modified."""
+    for i in range(3):
+        A[i, i] += 1e-12
     c00 = A[1, 1] * A[2, 2] - A[1, 2] * A[1, 2]
     c01 = A[0, 2] * A[1, 2] - A[0, 1] * A[2, 2]
     c02 = A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]
@@ -263,12 +275,7 @@ def _solve_views(xy: np.ndarray, w: np.ndarray, R: np.ndarray, t: np.ndarray, f:
             rhs = t[c, k] - xy[c, k] * t[c, 2]
             for i in range(3):
                 row[i] = xy[c, k] * R[c, 2, i] - R[c, k, i]
-            for i in range(3):
-                b[i] += row[i] * rhs
-                for j in range(3):
-                    A[i, j] += row[i] * row[j]
-    for i in range(3):
-        A[i, i] += 1e-12
+            _add_row(A, b, row, rhs)
     _solve_sym3(A, b, X)
     step = np.zeros(3)
     for _ in range(iterations):
@@ -284,12 +291,7 @@ def _solve_views(xy: np.ndarray, w: np.ndarray, R: np.ndarray, t: np.ndarray, f:
                 r = (p - xy[c, k]) * f[c, k]
                 for i in range(3):
                     row[i] = (R[c, k, i] - p * R[c, 2, i]) * f[c, k] * iz
-                for i in range(3):
-                    b[i] += row[i] * r
-                    for j in range(3):
-                        A[i, j] += row[i] * row[j]
-        for i in range(3):
-            A[i, i] += 1e-12
+                _add_row(A, b, row, r)
         _solve_sym3(A, b, step)
         for i in range(3):
             X[i] -= step[i]
