@@ -134,6 +134,7 @@ class PointReconstructor:
         self.C = len(cams)
         self.f = np.array([0.5 * (c.matrix[0, 0] + c.matrix[1, 1]) for c in cams])
         self.centres = np.stack([c.center for c in cams])  # (C, 3) world metres
+        self.last_px = np.array([c.size for c in cams], float)[:, None, :] - 1.0  # (C, 1, 2) last pixel's u, v
         self.pairs: list[tuple[int, int, np.ndarray]] = []
         for a in range(self.C):
             for b in range(a + 1, self.C):
@@ -202,8 +203,7 @@ class PointReconstructor:
         # between two markers) it still explains the view, the marker is in it, not missing
         in_merged = np.zeros((C, K), bool)
         proj, depth = self.tri.project(X)  # (C, K, 2), (C, K)
-        size = np.array([c.size for c in self.rig.cameras], float)[:, None, :] - 1.0  # (C, 1, 2)
-        inside = (depth > 0.1) & (proj >= 0).all(axis=2) & (proj <= size).all(axis=2)
+        inside = (depth > 0.1) & (proj >= 0).all(axis=2) & (proj <= self.last_px).all(axis=2)
         for c in range(C):
             v = views[c]
             if len(v) == 0:
