@@ -50,8 +50,11 @@ def default_config_path() -> Path:
     return Path(str(files("samba_configs").joinpath("server.toml")))
 
 
-def load_server_configs(path: str | os.PathLike | None = None, **sync_overrides) -> ServerConfigs:
-    """Load configs/server.toml (default: the packaged one); raise ConfigError on bad keys."""
+def load_server_configs(path: str | os.PathLike | None = None, placement: str | None = None,
+                        **sync_overrides) -> ServerConfigs:
+    """Load configs/server.toml (default: the packaged one); raise ConfigError on bad keys.
+    placement: "auto", "skin" or "joint-centres" (``--placement``) overrides ``[reconstruct]
+    placement``; sync_overrides (e.g. fps) override ``[sync]`` keys."""
     p = Path(path) if path is not None else default_config_path()
     data = read_toml(p) if p.exists() else {}
     sync = dict(data.get("sync", {}))
@@ -61,8 +64,20 @@ def load_server_configs(path: str | os.PathLike | None = None, **sync_overrides)
         sync=from_dict(SyncConfig, sync, f"{p} [sync]"),
         triangulate=from_dict(TriangulateConfig, data.get("triangulate", {}), f"{p} [triangulate]"),
         labelling=_label_config(data.get("labelling", {}), p),
-        reconstruct=from_dict(ReconstructConfig, data.get("reconstruct", {}), f"{p} [reconstruct]"),
+        reconstruct=from_dict(ReconstructConfig, {**data.get("reconstruct", {}),
+                                                  **({"placement": placement.replace("-", "_")} if placement else {})},
+                              f"{p} [reconstruct]"),
     )
+
+
+def add_placement_arg(ap: argparse.ArgumentParser) -> None:
+    """``--placement``: where the markers sit, for a subject measured live."""
+    ap.add_argument("--placement", choices=("auto", "skin", "joint-centres"),
+                    help="where the markers sit: skin (taped on the acromion, the lateral knee and ankle, the "
+                         "back of the wrist: every real take), joint-centres (simulated takes) or auto (decided "
+                         "from the knee and ankle spacing in the standard pose; a near call when the feet "
+                         "are at hip width and the landmarks sit close to the joints). Default: [reconstruct] "
+                         "placement (auto). The summary says what was used and why")
 
 
 def _label_config(table: dict, p: Path) -> LabelConfig:

@@ -14,7 +14,7 @@ from samba_common.config import ConfigError
 from samba_common.formats import save_joints
 from samba_common.progress import Progress
 from samba_server.activity import MoteActivity
-from samba_server.app import build_server, load_server_configs, setup_logging
+from samba_server.app import add_placement_arg, build_server, load_server_configs, setup_logging
 from samba_server.process import VideoError, _open_video, process_videos
 from samba_server.record import RecorderError
 
@@ -28,6 +28,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fps", type=float, help="frame rate of the videos (default: read from the files, else 30)")
     ap.add_argument("--record", metavar="TAKE.mcap", help="also record the packets and poses as a take")
     ap.add_argument("--db", help="motion database (.npz) (default: the shipped one)")
+    add_placement_arg(ap)
     ap.add_argument("--config", help="server TOML (default: the packaged configs/server.toml)")
     ap.add_argument("--mote-config", help="mote TOML for detection/tracking (default: built-in defaults)")
     ap.add_argument("-v", "--verbose", action="count", default=0)
@@ -56,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
             from samba_mote.pipeline import load_mote_config
 
             mote_config = load_mote_config(args.mote_config)
-        configs = load_server_configs(args.config, fps=fps)
+        configs = load_server_configs(args.config, args.placement, fps=fps)
         server = build_server(args.calibration, configs, args.db, args.record, live=False)
         import cv2
 
@@ -70,12 +71,16 @@ def main(argv: list[str] | None = None) -> int:
             joints, t, extra = process_videos(server, videos, fps, mote_config, bar, activity)
         if server.recorder is not None:
             server.recorder.close()
-        save_joints(args.out, joints, t, **extra)
+        subject = server.subject
+        save_joints(args.out, joints, t, **extra, **(subject.metadata() if subject is not None else {}))
     except (VideoError, CalibrationError, ConfigError, RecorderError, OSError, ValueError) as exc:
         print(f"samba-process: {exc}", file=sys.stderr)
         return 1
     solved = int(np.isfinite(joints).all(axis=(1, 2)).sum())
     print(f"wrote {args.out}: {len(t)} frames, {solved} solved", file=sys.stderr)
+    note = getattr(server.reconstructor, "placement_note", None)
+    if note:
+        print(f"marker placement: {note}", file=sys.stderr)
     for line in activity.warnings():
         print(f"samba-process: WARNING: {line}", file=sys.stderr)
     if solved < 0.5 * len(t):

@@ -7,7 +7,7 @@ import sys
 
 from samba_common.calib import CalibrationError
 from samba_common.config import ConfigError
-from samba_server.app import add_network_args, build_server, load_server_configs, run_live, setup_logging
+from samba_server.app import add_network_args, add_placement_arg, build_server, load_server_configs, run_live, setup_logging
 from samba_server.record import RecorderError
 
 
@@ -23,6 +23,7 @@ def main(argv: list[str] | None = None) -> int:
                          "measured live: the standard pose tells skin landmarks from joint centres and gives "
                          "the bone lengths, skin offsets are calibrated from the first second after it "
                          "([reconstruct] placement, subject_seconds)")
+    add_placement_arg(ap)
     ap.add_argument("--config", help="server TOML (default: the packaged configs/server.toml)")
     ap.add_argument("--fps", type=float, help="nominal mote frame rate (overrides [sync] fps)")
     ap.add_argument("--http", metavar="[HOST:]PORT", help="serve the browser viewer")
@@ -32,7 +33,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     setup_logging(args.verbose)
     try:
-        configs = load_server_configs(args.config, fps=args.fps)
+        configs = load_server_configs(args.config, args.placement, fps=args.fps)
         server = build_server(args.calibration, configs, args.db, args.record, subject=args.subject)
     except (ConfigError, CalibrationError, RecorderError, OSError, ValueError) as exc:
         print(f"samba-server: {exc}", file=sys.stderr)

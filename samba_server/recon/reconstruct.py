@@ -195,6 +195,8 @@ class Reconstructor:
         self._estimating = lengths is None
         #: live subject: placement still to decide ("auto"), or fixed; None = the caller gave it
         self._live_placement = self.config.placement if lengths is None and offsets is None else None
+        #: the live placement and why it was chosen ("skin (auto: standard pose ...)"), once decided
+        self.placement_note: str | None = None
         self._next_offsets: np.ndarray | None = None
         self._calibration: LiveSubjectCalibration | None = None
         self.subject: Subject | None = None
@@ -293,14 +295,16 @@ class Reconstructor:
     def _decide_placement(self, buffer: np.ndarray) -> None:
         """Live, no subject given: skin landmarks or joint centres from the standard-pose frames
         (``config.placement`` "auto"), so that the body estimate removes the right offsets."""
-        placement, why = self._live_placement, "set in [reconstruct] placement"
+        placement, why = self._live_placement, "given: --placement or [reconstruct] placement"
         if placement == "auto":
             found = placement_from_standard_pose(buffer, self.db.mean_lengths)
             if found is None:
-                placement, why = "joint_centres", "no standard pose in the first frames: joint centres assumed"
+                placement, why = "joint_centres", "auto: no standard pose in the first frames: joint centres assumed"
             else:
                 placement, why, _n = found
-        log.info("live marker placement: %s (%s)", placement.replace("_", " "), why)
+                why = "auto: " + why
+        self.placement_note = f"{placement.replace('_', ' ')} ({why})"
+        log.info("live marker placement: %s", self.placement_note)
         self._live_placement = placement
         self._next_offsets = TYPICAL_OFFSETS.copy() if placement == "skin" else np.zeros((N_MARKERS, 3))
 
