@@ -78,7 +78,8 @@ class LabelConfig:
     lost_after: float = 0.3  #: this long with most points unexplained: identify again
     min_points: int = 4  #: points needed to identify
     min_margin: float = 0.6  #: an identification this much better than the runner-up is taken at once
-    max_wait: float = 0.2  #: else the best one is taken after this long
+    max_wait: float = 0.2  #: else the best one is taken after this long ...
+    steady_s: float = 0.05  #: ... or once it has named the same markers at the same places (gate_m) this long (inf: never)
     audit_interval: float = 0.1  #: s: while tracking leaves a sure point unnamed, identify afresh this often (inf: never) ...
     audit_margin: float = 1.0  #: ... and take the identification when it scores this much more than the tracked names
     audit_agree: float = 0.3  #: score, per marker, of agreeing with a tracked name in that identification
@@ -154,6 +155,8 @@ class Labeller:
         self._t_good = -np.inf          # last frame where tracking explained the points
         self._t_lost: float | None = None  # first frame with points after the labels were lost
         self._t_ambiguous: float | None = None
+        #: (since, last frame's time, (8, 3) markers) of an unclear identification's best labelling
+        self._steady: tuple[float, float, np.ndarray] | None = None
         self._shared = np.zeros(N_MARKERS, bool)
         self._knees_crossed_since: float | None = None
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
@@ -190,6 +193,7 @@ class Labeller:
         self._skel = []
         self._facing = None
         self._t_lost = self._t_ambiguous = None
+        self._steady = None
         self._reset_timers()
         self._free_hist = []
 
@@ -759,7 +763,7 @@ class Labeller:
             return None
         hyps = identify(pts.X, self._trust(pts), self._body, self._hint(t), shared=pts.merged_all)
         if not hyps:
-            self._t_ambiguous = None
+            self._t_ambiguous = self._steady = None
             return None
         best = hyps[0]
         margin = best.score - hyps[1].score if len(hyps) > 1 else best.score
@@ -772,10 +776,10 @@ class Labeller:
             if (labels[[LS, RS]] < 0).any() or np.count_nonzero(labels >= 0) < cfg.min_points:
                 if self._t_ambiguous is None:
                     self._t_ambiguous = t
-                if t - self._t_ambiguous < cfg.max_wait:
+                if t - self._t_ambiguous < cfg.max_wait and t - self._steady_since(pts, best, t) < cfg.steady_s - 1e-6:
                     return None
                 labels = best.labels.copy()
-        self._t_ambiguous = None
+        self._t_ambiguous = self._steady = None
         margin = _margin(labels, best.score, hyps[1:])
         out = self._named(pts, labels, best.facing)
         named = labels >= 0
@@ -788,6 +792,22 @@ class Labeller:
         log.info("t=%.3f s: markers identified from %d points (%d named, margin %.2f)", t, len(pts),
                  int(named.sum()), margin)
         return out, LabelQuality(int(named.sum()), len(pts), 0.1 * margin, 0.0, "identified", 0)
+
+    def _steady_since(self, pts: Points3D, best, t: float) -> float:
+        """Since when (s) an unclear identification's best labelling has named the same markers
+        within ``gate_m`` of where it named them the frame before: a runner-up close in score (the
+        mirror image leaving a knee out, a subject back from a blackout) that never takes the
+        lead is no reason to wait the whole ``max_wait``."""
+        X = self._named(pts, best.labels, best.facing)
+        since = t
+        if self._steady is not None and self._steady[1] >= self._t_prev - 1e-6:
+            t0, _t1, Y = self._steady
+            same = np.isfinite(X).all(axis=1) == np.isfinite(Y).all(axis=1)
+            near = np.linalg.norm(np.nan_to_num(X - Y), axis=1) <= self.config.gate_m
+            if same.all() and near.all():
+                since = t0
+        self._steady = (since, t, X)
+        return since
 
     def _update(self, out: np.ndarray, t: float, reset: bool = False, shared: np.ndarray | None = None) -> None:
         """Move the tracks to the named markers out (8, 3); shared (8,) bool: markers placed
