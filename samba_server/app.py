@@ -129,7 +129,8 @@ def build_server(calibration: str | os.PathLike, configs: ServerConfigs, db: str
     if not live and server_cfg.max_lag_ms:
         server_cfg = ServerConfig(**{**server_cfg.__dict__, "max_lag_ms": 0.0})
     subj = None
-    meta = {"tool": "samba-server"}
+    # the placement asked for (--placement / [reconstruct] placement): a replay decides as live did
+    meta = {"tool": "samba-server", "placement": configs.reconstruct.placement}
     if subject:
         from samba_common.subject import load_subject
 

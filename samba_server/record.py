@@ -652,6 +652,17 @@ def take_subject(path: str | Path):
     return _subject_or_none(toml, f"{path} (its recorded subject)") if toml else None
 
 
+def take_placement(path: str | Path) -> str | None:
+    """The marker placement the server that recorded a take was asked for (``--placement`` or
+    ``[reconstruct] placement``: "auto", "skin" or "joint_centres"; ``placement`` in the
+    ``samba`` metadata record), or None for takes recorded before it was kept."""
+    reader = TakeReader(path, topics=[CALIBRATION_TOPIC])
+    for _m in reader:
+        break  # the metadata record is written before the first message
+    placement = reader.metadata.get("samba", {}).get("placement")
+    return placement if placement in ("auto", "skin", "joint_centres") else None
+
+
 def last_subject(path: str | Path):
     """The last subject a take's poses were solved with (the last subject event when it was
     measured live, else :func:`take_subject`), or None."""

@@ -13,7 +13,7 @@ from samba_common.config import ConfigError
 from samba_common.progress import Progress
 from samba_server.activity import MoteActivity
 from samba_server.app import add_network_args, export_joints, load_server_configs, make_reconstructor, setup_logging
-from samba_server.record import TakeReader
+from samba_server.record import TakeReader, take_placement
 from samba_server.replay import Player, replay_into, take_calibration, take_subject
 from samba_server.server import Server, ServerConfig
 
@@ -48,7 +48,7 @@ def main(argv: list[str] | None = None) -> int:
                 print("samba-replay: the take has no calibration; pass --calibration", file=sys.stderr)
                 return 1
             rig = CameraRig.loads(toml, path=args.calibration or f"{args.take} (its recorded calibration)")
-            cfg = load_server_configs(args.config)
+            cfg = load_server_configs(args.config, take_placement(args.take))  # placed as live
             subject = take_subject(args.take)  # recorded with --subject: solve with it again
             server = Server(rig, toml, make_reconstructor(args.db, cfg.reconstruct, subject),
                             ServerConfig(**{**cfg.server.__dict__, "max_lag_ms": 0.0}), cfg.sync, cfg.triangulate,

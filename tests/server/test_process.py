@@ -13,6 +13,7 @@ from samba_common.formats import load_joints
 from samba_common.skeleton import MARKER_JOINT
 from samba_mote.sim.render import render_take
 from samba_server.cli.process import main
+from samba_server.cli.replay import main as replay_main
 from samba_server.recon import reconstruct_take
 from samba_server.record import TakeReader
 
@@ -45,11 +46,16 @@ def _run_process(tmp_path, capsys):
     # file carries the subject solved with
     assert "marker placement: joint centres (auto: standard pose" in capsys.readouterr().err
     assert str(np.load(out)["subject_placement"]) == "joint_centres"
-    # the user overrides it: --placement skin is what the solver uses
-    told = tmp_path / "told.npz"
-    assert main([str(calib), *map(str, videos), "--out", str(told), "--fps", "30", "--placement", "skin"]) == 0
+    # the user overrides it: --placement skin is what the solver uses, and a replay of the
+    # recording places the markers as the recording server did
+    told, told_take, replayed = tmp_path / "told.npz", tmp_path / "told.mcap", tmp_path / "replayed.npz"
+    assert main([str(calib), *map(str, videos), "--out", str(told), "--fps", "30", "--placement", "skin",
+                 "--record", str(told_take)]) == 0
     assert "marker placement: skin (given: --placement" in capsys.readouterr().err
     assert str(np.load(told)["subject_placement"]) == "skin"
+    assert replay_main([str(told_take), "--out", str(replayed)]) == 0
+    assert str(np.load(replayed)["subject_placement"]) == "skin"
+    np.testing.assert_array_equal(load_joints(replayed).joints, load_joints(told).joints)
     got = load_joints(out)
     assert got.joints.shape == joints.shape  # one row per video frame
     np.testing.assert_allclose(got.t, np.arange(len(joints)) / FPS)
