@@ -77,7 +77,7 @@ def add_placement_arg(ap: argparse.ArgumentParser) -> None:
                          "back of the wrist: every real take), joint-centres (simulated takes) or auto (decided "
                          "from the knee and ankle spacing in the standard pose; a near call when the feet "
                          "are at hip width and the landmarks sit close to the joints). Default: [reconstruct] "
-                         "placement (auto). The summary says what was used and why")
+                         "placement (auto). samba-process prints the placement used and why; samba-server logs it (-v)")
 
 
 def _label_config(table: dict, p: Path) -> LabelConfig:
