@@ -74,7 +74,9 @@ def test_process_videos_close_to_clean_markers(tmp_path, capsys):
     """Rendered videos -> mote pipeline -> server pipeline (3D-first labelling): within +2 cm of
     the reconstruction from the true markers. The target is +0.5 cm; the 3D labelling measured
     +1.6 cm on this take (merged blobs bias the points; docs/BENCHMARKS.md), so this guards
-    against regressions, not the target."""
+    against regressions, not the target. On the same videos: the marker placement decided from
+    the standard pose is printed and written into joints.npz, ``--placement`` overrides it, and
+    a replay of that recording places the markers the same way (equal joints)."""
     err, ref = _run_process(tmp_path, capsys)
     assert err <= ref + 0.02
 
