@@ -641,14 +641,19 @@ def _subject_or_none(toml: str, where: str):
         return None
 
 
+def _server_metadata(path: str | Path) -> dict:
+    """The ``samba`` metadata record the recording server wrote (empty when there is none)."""
+    reader = TakeReader(path, topics=[CALIBRATION_TOPIC])
+    for _m in reader:
+        break  # the metadata record is written before the first message
+    return reader.metadata.get("samba", {})
+
+
 def take_subject(path: str | Path):
     """The subject a take was recorded with when the server was given one (``--subject``:
     ``subject_toml`` in the ``samba`` metadata record), as a samba_common.subject.Subject, or
     None (then a replayed solver measures it live again, as the server did)."""
-    reader = TakeReader(path, topics=[CALIBRATION_TOPIC])
-    for _m in reader:
-        break  # the metadata record is written before the first message
-    toml = reader.metadata.get("samba", {}).get("subject_toml")
+    toml = _server_metadata(path).get("subject_toml")
     return _subject_or_none(toml, f"{path} (its recorded subject)") if toml else None
 
 
@@ -656,10 +661,7 @@ def take_placement(path: str | Path) -> str | None:
     """The marker placement the server that recorded a take was asked for (``--placement`` or
     ``[reconstruct] placement``: "auto", "skin" or "joint_centres"; ``placement`` in the
     ``samba`` metadata record), or None for takes recorded before it was kept."""
-    reader = TakeReader(path, topics=[CALIBRATION_TOPIC])
-    for _m in reader:
-        break  # the metadata record is written before the first message
-    placement = reader.metadata.get("samba", {}).get("placement")
+    placement = _server_metadata(path).get("placement")
     return placement if placement in ("auto", "skin", "joint_centres") else None
 
 
