@@ -1,10 +1,10 @@
 """Mote wire formats: the binary 2D marker packet and the JSON status message.
 
-Marker packet, version 1, little endian (defined only here; FORMATS.md is the contract)::
+Marker packet, version 2, little endian (defined only here; FORMATS.md is the contract)::
 
     header  "<4sBBHIqHHBB" (26 bytes)
         magic      4s   b"SMBM"
-        version    B    1
+        version    B    2 (1 is read too)
         reserved   B    0 (readers ignore it)
         n          H    number of marker records (<= MAX_MARKERS)
         seq        I    sequence number (wraps at 2**32)
@@ -14,13 +14,20 @@ Marker packet, version 1, little endian (defined only here; FORMATS.md is the co
         threshold  B    binarisation threshold used for this frame
         id_len     B    length of the UTF-8 mote id (1..MAX_ID_LEN)
     mote id  id_len bytes of UTF-8
-    records  n x 12 bytes: label u1, flags u1, u f4, v f4, area u2
+    records  n x 18 bytes: label u1, flags u1, u f4, v f4, area u2,
+             var_u f2, cov_uv f2, var_v f2 (version 1: 12 bytes, without the moments)
 
 ``label`` is an index into ``MARKER_NAMES`` (0..7) or :data:`UNLABELLED` (255); ``flags`` is
 a bit set of :data:`FLAG_TRACKED`, :data:`FLAG_PREDICTED`, :data:`FLAG_LOST`,
 :data:`FLAG_MERGED` (and :data:`FLAG_UNCERTAIN` on unlabelled records of markers the tracker
 follows but whose identity it is not sure of, e.g. after two markers crossed). A predicted or lost record carries the tracker's predicted position
 (or NaN when it has none) and area 0: it was *not* measured in this frame.
+
+The moments are the blob's intensity-weighted second central moments in px^2 (half floats:
+three significant digits, plenty for blobs a few pixels wide), NaN on records not measured and
+in version-1 packets. Two markers in one blob make it elongated: the gap between the
+eigenvalues of its 2x2 covariance is a quarter of their squared separation, along the major
+axis, which is how the server places two markers it cannot see apart.
 """
 
 from __future__ import annotations
@@ -33,12 +40,16 @@ from typing import Any
 import numpy as np
 
 MAGIC = b"SMBM"
-VERSION = 1
+VERSION = 2
 HEADER = struct.Struct("<4sBBHIqHHBB")
-RECORD = np.dtype([("label", "u1"), ("flags", "u1"), ("u", "<f4"), ("v", "<f4"), ("area", "<u2")])
+RECORD = np.dtype([("label", "u1"), ("flags", "u1"), ("u", "<f4"), ("v", "<f4"), ("area", "<u2"),
+                   ("var_u", "<f2"), ("cov_uv", "<f2"), ("var_v", "<f2")])
+RECORD_V1 = np.dtype([("label", "u1"), ("flags", "u1"), ("u", "<f4"), ("v", "<f4"), ("area", "<u2")])
+_RECORDS = {1: RECORD_V1, 2: RECORD}
 MAX_MARKERS = 1024
 MAX_ID_LEN = 64
 MAX_PACKET = HEADER.size + MAX_ID_LEN + MAX_MARKERS * RECORD.itemsize
+_MAX_F2 = 65000.0  #: moments beyond this (no marker blob is that large) are written as NaN
 
 UNLABELLED = 255
 FLAG_TRACKED = 0x01  #: measured this frame and matched to its track
@@ -60,7 +71,9 @@ class MarkerPacket:
 
     labels: (N,) uint8 marker index or UNLABELLED; uv: (N, 2) float32 pixels (raw, distorted
     image coordinates, origin at the centre of the top-left pixel); area: (N,) uint16 pixels;
-    flags: (N,) uint8 FLAG_* bit set. t_ns: capture time, ns since the Unix epoch.
+    flags: (N,) uint8 FLAG_* bit set; moments: (N, 3) float32 blob second central moments
+    (var_u, cov_uv, var_v) px^2, NaN where not measured. t_ns: capture time, ns since the Unix
+    epoch.
     """
 
     mote_id: str
@@ -73,6 +86,11 @@ class MarkerPacket:
     uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))
     area: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint16))
     flags: np.ndarray = field(default_factory=lambda: np.zeros(0, np.uint8))
+    moments: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.moments is None:
+            self.moments = np.full((len(self.labels), 3), np.nan, np.float32)
 
     def __len__(self) -> int:
         return int(len(self.labels))
@@ -110,12 +128,18 @@ def encode_packet(p: MarkerPacket) -> bytes:
                            p.threshold, len(mid))
     except struct.error as exc:
         raise PacketError(f"header field out of range: {exc}") from None
+    mom = np.asarray(p.moments, dtype=np.float32).reshape(-1, 3) if p.moments is not None \
+        else np.full((n, 3), np.nan, np.float32)
+    if len(mom) != n:
+        raise PacketError(f"field lengths differ: labels {n}, moments {len(mom)}")
+    mom = np.where(np.abs(mom) <= _MAX_F2, mom, np.nan)
     rec = np.empty(n, RECORD)
     rec["label"] = p.labels
     rec["flags"] = p.flags
     rec["u"] = uv[:, 0]
     rec["v"] = uv[:, 1]
     rec["area"] = np.clip(np.asarray(p.area), 0, 0xFFFF)
+    rec["var_u"], rec["cov_uv"], rec["var_v"] = mom[:, 0], mom[:, 1], mom[:, 2]
     return head + mid + rec.tobytes()
 
 
@@ -129,13 +153,14 @@ def decode_packet(buf: bytes | bytearray | memoryview) -> MarkerPacket:
     magic, ver, _res, n, seq, t_ns, w, h, thr, id_len = HEADER.unpack_from(buf)
     if magic != MAGIC:
         raise PacketError(f"bad magic {magic!r} (expected {MAGIC!r})")
-    if ver != VERSION:
-        raise PacketError(f"unsupported packet version {ver} (this build reads {VERSION})")
+    if ver not in _RECORDS:
+        raise PacketError(f"unsupported packet version {ver} (this build reads 1..{VERSION})")
+    record = _RECORDS[ver]
     if n > MAX_MARKERS:
         raise PacketError(f"too many markers: {n} > {MAX_MARKERS}")
     if not 1 <= id_len <= MAX_ID_LEN:
         raise PacketError(f"bad mote id length {id_len}")
-    expected = HEADER.size + id_len + n * RECORD.itemsize
+    expected = HEADER.size + id_len + n * record.itemsize
     if len(buf) != expected:
         kind = "truncated" if len(buf) < expected else "trailing bytes in"
         raise PacketError(f"{kind} packet: {len(buf)} bytes, header says {expected}")
@@ -143,12 +168,16 @@ def decode_packet(buf: bytes | bytearray | memoryview) -> MarkerPacket:
         mote_id = buf[HEADER.size:HEADER.size + id_len].decode("utf-8")
     except UnicodeDecodeError:
         raise PacketError("mote id is not valid UTF-8") from None
-    rec = np.frombuffer(buf, RECORD, count=n, offset=HEADER.size + id_len)
+    rec = np.frombuffer(buf, record, count=n, offset=HEADER.size + id_len)
     uv = np.empty((n, 2), np.float32)
     uv[:, 0] = rec["u"]
     uv[:, 1] = rec["v"]
+    mom = np.full((n, 3), np.nan, np.float32)
+    if ver >= 2:
+        mom[:, 0], mom[:, 1], mom[:, 2] = rec["var_u"], rec["cov_uv"], rec["var_v"]
+        mom[~(np.abs(mom) <= _MAX_F2)] = np.nan  # infinities of a corrupted record
     return MarkerPacket(mote_id, seq, t_ns, w, h, thr, rec["label"].copy(), uv, rec["area"].copy(),
-                        rec["flags"].copy())
+                        rec["flags"].copy(), mom)
 
 
 # ---------------------------------------------------------------------------------- status

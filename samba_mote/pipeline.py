@@ -101,7 +101,7 @@ class MotePipeline:
         self.last_blobs = len(det)
         h, w = frame.shape
         pkt = MarkerPacket(self.mote_id, self.seq, int(t_ns), w, h, det.threshold, out.labels, out.uv, out.area,
-                           out.flags)
+                           out.flags, out.moments(det.cov))
         self.seq = (self.seq + 1) & 0xFFFFFFFF
         return pkt
 

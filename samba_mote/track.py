@@ -86,12 +86,23 @@ def _major_axis(vu: float, cuv: float, vv: float) -> tuple[float, float, float]:
 
 @dataclass
 class TrackOutput:
-    """Records for one packet: labels (N,) uint8, uv (N, 2) float32, area (N,) uint16, flags (N,) uint8."""
+    """Records for one packet: labels (N,) uint8, uv (N, 2) float32, area (N,) uint16, flags (N,)
+    uint8; blob (N,) int64 the detection each record measured (-1: a prediction)."""
 
     labels: np.ndarray
     uv: np.ndarray
     area: np.ndarray
     flags: np.ndarray
+    blob: np.ndarray
+
+    def moments(self, cov: np.ndarray | None) -> np.ndarray:
+        """(N, 3) float32 second moments of each record's blob from the detections' cov (B, 3)
+        px^2; NaN for predictions (or without cov)."""
+        out = np.full((len(self.blob), 3), np.nan, np.float32)
+        if cov is not None and len(cov):
+            has = self.blob >= 0
+            out[has] = cov[self.blob[has]]
+        return out
 
 
 class MarkerTracker:
@@ -445,7 +456,7 @@ class MarkerTracker:
         """Packet records: one per marker (measured, predicted or lost; uncertain ones unlabelled),
         then every blob no track claimed (unlabelled). lists: (uv, area, pos, missing) already
         as Python lists (saves converting them again)."""
-        labels, pts, areas, flags = [], [], [], []
+        labels, pts, areas, flags, blobs = [], [], [], [], []
         if lists is None:
             uvl, arl, posl, miss = uv.tolist(), area.tolist(), self._pos, self._missing
         else:
@@ -469,11 +480,13 @@ class MarkerTracker:
                 emitted.add(b)
                 pts.append(uvl[b])
                 areas.append(arl[b])
+                blobs.append(b)
             else:
                 labels.append(m)
                 pts.append(posl[m])
                 areas.append(0)
                 flags.append(FLAG_PREDICTED if miss[m] <= coast else FLAG_LOST)
+                blobs.append(-1)
         if len(used) < n:
             for b in range(n):
                 if b not in used:
@@ -481,13 +494,14 @@ class MarkerTracker:
                     pts.append(uvl[b])
                     areas.append(arl[b])
                     flags.append(0)
+                    blobs.append(b)
         if arl and (min(arl) < 0 or max(arl) > 65535):
             areas = [min(max(a, 0), 65535) for a in areas]
         return TrackOutput(np.array(labels, np.uint8), np.array(pts, np.float32).reshape(-1, 2),
-                           np.array(areas).astype(np.uint16), np.array(flags, np.uint8))
+                           np.array(areas).astype(np.uint16), np.array(flags, np.uint8), np.array(blobs, np.int64))
 
     @staticmethod
     def _unlabelled(uv: np.ndarray, area: np.ndarray) -> TrackOutput:
         n = len(uv)
         return TrackOutput(np.full(n, UNLABELLED, np.uint8), uv.astype(np.float32),
-                           np.clip(area, 0, 65535).astype(np.uint16), np.zeros(n, np.uint8))
+                           np.clip(area, 0, 65535).astype(np.uint16), np.zeros(n, np.uint8), np.arange(n))

@@ -588,7 +588,7 @@ class TakeReader:
                 except StopIteration:
                     break
                 except (McapError, ValueError, EOFError, struct.error, OSError, IndexError, KeyError, UnicodeDecodeError,
-                        MemoryError) as exc:
+                        MemoryError, OverflowError) as exc:
                     self.truncated = True
                     self.error = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
                     log.info("%s: stopped at a truncated or damaged tail (%s)", self.path, self.error)

@@ -34,20 +34,22 @@ class ViewBlobs:
 
     uv: (N, 2) raw pixels; capacity: (N,) int, markers the blob may stand for (1, or 2 when
     merged); radius: (N,) px, radius of a disk of the blob's area; hint: (N,) int, the mote's
-    label (0..7) or -1.
+    label (0..7) or -1; moments: (N, 3) px^2 second central moments (var_u, cov_uv, var_v), NaN
+    where the mote sent none.
     """
 
     uv: np.ndarray
     capacity: np.ndarray
     radius: np.ndarray
     hint: np.ndarray
+    moments: np.ndarray
 
     def __len__(self) -> int:
         return len(self.uv)
 
     @staticmethod
     def empty() -> "ViewBlobs":
-        return ViewBlobs(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64))
+        return ViewBlobs(np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0, np.int64), np.zeros((0, 3)))
 
 
 def view_blobs(packet, merged_area_ratio: float = 1.5, max_blobs: int = 40) -> ViewBlobs:
@@ -68,6 +70,7 @@ def view_blobs(packet, merged_area_ratio: float = 1.5, max_blobs: int = 40) -> V
         return ViewBlobs.empty()
     labels = np.asarray(packet.labels, np.int64)[measured]
     flags, area, uv = flags[measured], area[measured], uv[measured]
+    moments = np.asarray(packet.moments, float).reshape(-1, 3)[measured]
     # one row per distinct blob: the tracker repeats a merged blob once per marker it holds
     key = np.round(uv * 1000.0).astype(np.int64)
     key = key[:, 0] * (1 << 32) + key[:, 1]  # one integer per position (1-D unique is much faster)
@@ -88,4 +91,4 @@ def view_blobs(packet, merged_area_ratio: float = 1.5, max_blobs: int = 40) -> V
     if len(first) > max_blobs:
         keep = np.sort(np.argsort(a, kind="stable")[:max_blobs])
         first, merged, hint, a = first[keep], merged[keep], hint[keep], a[keep]
-    return ViewBlobs(uv[first], np.where(merged, 2, 1), np.sqrt(a / np.pi), hint)
+    return ViewBlobs(uv[first], np.where(merged, 2, 1), np.sqrt(a / np.pi), hint, moments[first])

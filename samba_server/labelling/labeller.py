@@ -37,6 +37,7 @@ from samba_common.skeleton import MARKER_JOINT, N_MARKERS
 
 from ..triangulate import Triangulator
 from .blobs import view_blobs
+from .elongation import blob_separation, jacobians, separation_3d
 from .identify import Hint, identify, right_of, score_labels
 from .points import PointReconstructor, Points3D, PointsConfig
 from .rigid import LA, LEVEL_M, LK, LS, LW, RA, RK, RS, RW, SIDES, Body
@@ -57,7 +58,9 @@ class LabelConfig:
     hint_m: float = 0.01  #: a view whose mote gave the same label lowers the cost by this
     merged_m: float = 0.02  #: a point seen in a merged blob costs this much more
     unexplained_m: float = 0.03  #: a 2-view point costs this much more per view that should have seen it
-    merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it
+    merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it (without blob moments)
+    split_sigma_px: float = 0.5  #: noise of the separation a merged blob's moments measure (inf: moments not used)
+    split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
     wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
@@ -158,6 +161,7 @@ class Labeller:
         #: (since, last frame's time, (8, 3) markers) of an unclear identification's best labelling
         self._steady: tuple[float, float, np.ndarray] | None = None
         self._shared = np.zeros(N_MARKERS, bool)
+        self._views: list = []  # this frame's blobs per camera (ViewBlobs)
         self._knees_crossed_since: float | None = None
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
         self._fit_swap: tuple[int, float] | None = None  # (row of _FIT_SWAPS, since when) that makes the names fit a body better
@@ -210,7 +214,8 @@ class Labeller:
         t: seconds. Returns ((8, 3) world metres, NaN = not named; quality)."""
         self.stats.frames += 1
         self._t_prev, self._t_frame = self._t_frame, t
-        pts = self.points.reconstruct([view_blobs(p) for p in packets])
+        self._views = [view_blobs(p) for p in packets]
+        pts = self.points.reconstruct(self._views)
         if len(pts) >= 2:
             self.stats.frames_with_points += 1
             sure = pts.X[pts.n_views >= 3]
@@ -351,7 +356,7 @@ class Labeller:
                     for lm, rm in crossed:
                         assign[[lm, rm]], arow[[lm, rm]], out[[lm, rm]] = assign[[rm, lm]], arow[[rm, lm]], out[[rm, lm]]
             self._uncross_knees(out, assign, arow, right, t)
-        _split_shared(out, assign, pred, cfg.merged_half_m, right)
+        self._split_shared(out, assign, pts, pred, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
         self._swap_for_shins(out, assign, arow, right)
         self._swap_arms(out, assign, arow, t)
@@ -748,13 +753,53 @@ class Labeller:
             static &= np.min(np.linalg.norm(X[:, None] - Y[None], axis=2), axis=1) <= 0.02
         return ~static
 
+    def _split_shared(self, out: np.ndarray, assign: np.ndarray, pts: Points3D, pred: np.ndarray,
+                      right: np.ndarray | None) -> None:
+        """Markers named to the same (merged) point: place them either side of it. Where some
+        view's mote measured the merged blob's second moments, the separation is measured
+        (:func:`~.elongation.separation_3d`, the guess of :func:`_guess_split` as its prior);
+        else it is that guess. out (8, 3) in place; assign (8,) point per marker (-1: none);
+        pred (8, 3) the markers' predictions; right (3,) the subject's right or None."""
+        cfg = self.config
+        for p in np.unique(assign[assign >= 0]):
+            ms = np.flatnonzero(assign == p)
+            if len(ms) != 2:
+                continue
+            m, n = ms
+            off = _guess_split(pred, m, n, cfg.merged_half_m, right)
+            if off is None:  # no way to tell which end is which: both stay on the point
+                continue
+            measured = self._measured_split(pts, int(p), 2.0 * off)
+            if measured is not None:
+                off = 0.5 * measured
+            out[m] = out[m] + off
+            out[n] = out[n] - off
+
+    def _measured_split(self, pts: Points3D, p: int, prior: np.ndarray) -> np.ndarray | None:
+        """The separation (3,) m of the two markers of point p from the moments of its merged
+        blobs (None: no view measured them). prior (3,) m: the guess, sign included."""
+        cfg = self.config
+        if not np.isfinite(cfg.split_sigma_px):
+            return None
+        cams, seps = [], []
+        for c, v in enumerate(self._views):
+            b = int(pts.blob[c, p]) if c < pts.blob.shape[0] else -1
+            if b < 0 or v.capacity[b] < 2 or not np.isfinite(v.moments[b]).all():
+                continue
+            cams.append(c)
+            seps.append(blob_separation(v.moments[b])[0])
+        if not cams:
+            return None
+        J = jacobians(lambda P: self.points.tri.project(P)[0], pts.X[p])[cams]
+        return separation_3d(J, np.array(seps), prior, cfg.split_sigma_px, cfg.split_prior_m)
+
     def _named(self, pts: Points3D, labels: np.ndarray, facing: np.ndarray) -> np.ndarray:
         """(8, 3) markers at the points labels (8,) name (-1 = unnamed), a shared point split
         along the right of facing (2,)."""
         out = np.full((N_MARKERS, 3), np.nan)
         named = labels >= 0
         out[named] = pts.X[labels[named]]
-        _split_shared(out, labels, np.zeros((N_MARKERS, 3)), self.config.merged_half_m, right_of(facing))
+        self._split_shared(out, labels, pts, np.zeros((N_MARKERS, 3)), right_of(facing))
         return out
 
     def _identify(self, pts: Points3D, t: float) -> tuple[np.ndarray, LabelQuality] | None:
@@ -851,27 +896,19 @@ def _held_since(since: float | None, holds: bool, t: float) -> float | None:
     return t if since is None else since
 
 
-def _split_shared(out: np.ndarray, assign: np.ndarray, pred: np.ndarray, half: float,
-                  right: np.ndarray | None = None) -> None:
-    """Markers named to the same (merged) point: place them either side of it, at most ``half``
-    m from it, along the subject's right (3,) for a left/right pair when it is known, else along
-    the difference of their predictions (8, 3). out (8, 3) in place."""
-    for p in np.unique(assign[assign >= 0]):
-        ms = np.flatnonzero(assign == p)
-        if len(ms) != 2:
-            continue
-        m, n = ms
-        off = 0.5 * (pred[m] - pred[n])
-        norm = float(np.linalg.norm(off))
-        if right is not None and (m, n) in _LR_PAIRS:
-            size = min(norm, half) if np.isfinite(norm) and norm > 0.02 else half
-            off = -size * right  # m is the left one
-        elif not np.isfinite(norm) or norm < 1e-9:
-            continue
-        else:
-            off = off * min(1.0, half / norm)
-        out[m] = out[m] + off
-        out[n] = out[n] - off
+def _guess_split(pred: np.ndarray, m: int, n: int, half: float, right: np.ndarray | None) -> np.ndarray | None:
+    """Half the separation (3,) m of markers m, n that share a point, guessed without the blob
+    moments: along the subject's right (3,) for a left/right pair when it is known (m the left
+    one), else along the difference of their predictions pred (8, 3); at most half m. None:
+    no direction known."""
+    off = 0.5 * (pred[m] - pred[n])
+    norm = float(np.linalg.norm(off))
+    if right is not None and (m, n) in _LR_PAIRS:
+        size = min(norm, half) if np.isfinite(norm) and norm > 0.02 else half
+        return -size * right
+    if not np.isfinite(norm) or norm < 1e-9:
+        return None
+    return off * min(1.0, half / norm)
 
 
 #: per side: (its shoulder, its wrist, the other shoulder)

@@ -42,6 +42,7 @@ from samba_common.calib import CameraRig
 
 from ..triangulate import TriangulationResult, Triangulator
 from .blobs import ViewBlobs, percentile
+from .elongation import blob_separation
 
 __all__ = ["PointsConfig", "Points3D", "PointReconstructor"]
 
@@ -61,6 +62,7 @@ class PointsConfig:
     double_size_ratio: float = 1.5  #: a point whose blobs are this many times a typical point's holds two markers
     body_radius_m: float = 1.5  #: 2-view points farther than this (horizontally) from the >= 3-view points' median rank lower
     part_px: float = 6.0  #: two single blobs this close in the one view that parts two otherwise merged markers
+    ends_min_px: float = 1.0  #: a merged blob whose moments part its markers by less is used by its centroid
 
 
 @dataclass
@@ -75,8 +77,8 @@ class Points3D:
     marker's at that distance in every view (median over views of area x depth^2, against the
     frame's typical point), so it is likely the midpoint of two markers no view separates;
     n_merged: (P,) views that saw it in a merged blob; mirrored: (P,) the point was seen only in
-    blobs it shares with one other point and was placed by reflection (see
-    :meth:`PointReconstructor._mirror`).
+    merged blobs it shares with other points and was placed by reflection (see
+    :meth:`PointReconstructor._mirror`) or on the blobs' far ends (:meth:`PointReconstructor._to_ends`).
     """
 
     X: np.ndarray
@@ -279,8 +281,9 @@ class PointReconstructor:
         if not keep:
             return Points3D.empty(C)
         idx = np.array(keep)
-        self._unshare(idx, X, err, n_views, blob, uv)
-        mirrored = self._mirror(idx, X, err, blob, uv, views)
+        resolved, placed = self._to_ends(idx, X, err, n_views, blob, uv, views)
+        self._unshare(idx, X, err, n_views, blob, uv, resolved)
+        mirrored = self._mirror(idx, X, err, blob, uv, views, ~placed) | placed
         X, err, n_views, blob, uv, missing, idx, parted = self._part(idx, X, err, n_views, blob, uv, missing,
                                                                      views, xy, cap)
         mirrored = np.r_[mirrored, np.zeros(len(idx) - len(mirrored), bool)]
@@ -311,16 +314,103 @@ class PointReconstructor:
         return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing[idx].astype(np.int64), blob,
                         votes, n_merged > 0, merged_all, n_merged, mirrored)
 
+    def _to_ends(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
+                 uv: np.ndarray, views: list[ViewBlobs]) -> tuple[set[tuple[int, int]], np.ndarray]:
+        """A merged blob's centroid lies between its two markers and pulls every point
+        triangulated with it towards the other marker (feet at hip width: both ankle points
+        4-6 cm inward). Where the mote sent the blob's second moments, its two markers sit at
+        the centroid -+ half the separation they measure (:func:`~.elongation.blob_separation`).
+
+        - An accepted point with >= 2 single-marker views takes, in each merged view, the end
+          nearest its projection from those views (two such points on one blob take one end
+          each, the nearer way round), when it lies within ``support_px``, and is triangulated
+          again.
+        - A point seen only in merged blobs (a marker hidden behind others wherever it is seen)
+          takes the other end of each blob one such point took; from >= 2 of those views it is
+          triangulated again on them alone: it is then a marker, not two markers' midpoint.
+
+        X, err, n_views, uv updated in place (candidate indices). Returns the (view, blob) pairs
+        so resolved and (len(idx),) bool, the points of the second kind placed so."""
+        cfg = self.config
+        placed = np.zeros(len(idx), bool)
+        capb = _blob_capacity(blob[:, idx], views)
+        anchored = (capb == 1).sum(axis=0) >= 2
+        users: dict[tuple[int, int], list[int]] = {}
+        at: dict[int, np.ndarray] = {}  # anchored point -> (3,) from its single-marker views alone
+        for r in np.flatnonzero(anchored & (capb > 1).any(axis=0)):
+            k = int(idx[r])
+            res = self._triangulate_views(uv, k, list(np.flatnonzero(capb[:, r] == 1)))
+            if res.n_views[0] < 2:
+                continue
+            at[k] = res.points[0]
+            for c in np.flatnonzero(capb[:, r] > 1):
+                users.setdefault((int(c), int(blob[c, k])), []).append(k)
+        ends: dict[tuple[int, int], np.ndarray] = {}  # (view, blob) -> (2, 2) px
+        free_end: dict[tuple[int, int], int] = {}  # the end no anchored point took
+        moved: set[int] = set()
+        for (c, b), ks in users.items():
+            e = self._blob_ends(views[c], b)
+            if e is None or len(ks) > 2:
+                continue
+            proj = self.tri.project(np.stack([at[k] for k in ks]))[0][c]  # (len(ks), 2)
+            d = np.linalg.norm(proj[:, None, :] - e[None], axis=2)  # (len(ks), 2)
+            if len(ks) == 1:
+                pick = [int(np.argmin(d[0]))]
+                free_end[(c, b)] = 1 - pick[0]
+            else:
+                pick = [0, 1] if d[0, 0] + d[1, 1] <= d[0, 1] + d[1, 0] else [1, 0]
+            if max(d[i, j] for i, j in enumerate(pick)) > cfg.support_px:
+                free_end.pop((c, b), None)
+                continue  # the ends are not where the points' own views put them
+            for k, j in zip(ks, pick):
+                uv[c, k] = e[j]
+                moved.add(k)
+            ends[(c, b)] = e
+        for k in moved:
+            res = self._triangulate_views(uv, k, list(np.flatnonzero(blob[:, k] >= 0)))
+            if res.n_views[0] >= 2 and self._plausible(res.points)[0]:
+                X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
+        for r in np.flatnonzero(~anchored & (capb > 1).any(axis=0)):
+            k = int(idx[r])
+            cs = [int(c) for c in np.flatnonzero(blob[:, k] >= 0) if (int(c), int(blob[c, k])) in free_end]
+            if len(cs) < 2:
+                continue
+            sub = uv[:, k].copy()
+            for c in cs:
+                key = (c, int(blob[c, k]))
+                sub[c] = ends[key][free_end[key]]
+            res = self._triangulate_views(sub[:, None, :], 0, cs)
+            if res.n_views[0] >= 2 and self._plausible(res.points)[0]:
+                X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
+                uv[:, k] = sub
+                placed[r] = True
+        return set(ends), placed
+
+    def _blob_ends(self, view: ViewBlobs, b: int) -> np.ndarray | None:
+        """(2, 2) px: where the two markers of merged blob b lie (centroid -+ half their measured
+        separation); None without moments or when they part by < ``ends_min_px`` (nearly in
+        line with the ray: the centroid is as good as either end)."""
+        mom = view.moments[b]
+        if not np.isfinite(mom).all():
+            return None
+        s = blob_separation(mom)[0]
+        if float(np.hypot(*s)) < self.config.ends_min_px:
+            return None
+        return view.uv[b] + np.array([0.5, -0.5])[:, None] * s
+
     def _unshare(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
-                 uv: np.ndarray) -> None:
+                 uv: np.ndarray, resolved: set[tuple[int, int]] = frozenset()) -> None:
         """A blob used by two accepted points seen in >= 3 views each is two markers merged: its
         centroid lies between them and would pull both towards each other. Such points are
-        triangulated again without it (the blob stays theirs for the naming stage)."""
+        triangulated again without it (the blob stays theirs for the naming stage), unless the
+        blob's ends were already given to them (resolved: (view, blob) pairs, :meth:`_to_ends`)."""
         srt = np.sort(blob[:, idx], axis=1)
         for c in np.flatnonzero(((srt[:, 1:] == srt[:, :-1]) & (srt[:, 1:] >= 0)).any(axis=1)):
             b = blob[c, idx]
             vals, counts = np.unique(b[b >= 0], return_counts=True)
             for v in vals[counts > 1]:
+                if (int(c), int(v)) in resolved:
+                    continue
                 sure = [k for k in idx[b == v] if n_views[k] >= 3]
                 if len(sure) < 2:
                     continue  # shared with a 2-view point, which may be a ghost: keep the view
@@ -330,19 +420,21 @@ class PointReconstructor:
                         blob[:, k] = keep_blob
 
     def _mirror(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, blob: np.ndarray, uv: np.ndarray,
-                views: list[ViewBlobs]) -> np.ndarray:
+                views: list[ViewBlobs], todo: np.ndarray | None = None) -> np.ndarray:
         """A marker hidden behind another in every view that sees it (a wrist passing in front
         of its shoulder, a knee behind the other) makes an accepted point k seen only in merged
         blobs, each of which holds one other point j (j uses the blob or projects inside it).
         The merged centroids lie halfway between the two markers, so k sits at their midpoint,
         not on the hidden marker: 7-20 cm off. When j has >= 2 views of its own (unmerged
         blobs), j is triangulated from those and k reflected through the midpoint, 2 X_k - X_j
-        (about 1 cm off on rendered takes). X, err updated in place (candidate indices);
-        returns (len(idx),) bool, the mirrored points."""
+        (about 1 cm off on rendered takes). todo: (len(idx),) bool, the points it may move (None:
+        all). X, err updated in place (candidate indices); returns (len(idx),) bool, the mirrored
+        points."""
         out = np.zeros(len(idx), bool)
         proj: dict[int, np.ndarray] = {}
         capb = _blob_capacity(blob[:, idx], views)
-        for r in np.flatnonzero((capb != 1).all(axis=0) & (capb > 1).any(axis=0)):
+        todo = np.ones(len(idx), bool) if todo is None else todo
+        for r in np.flatnonzero((capb != 1).all(axis=0) & (capb > 1).any(axis=0) & todo):
             k = idx[r]
             cs = np.flatnonzero(blob[:, k] >= 0)
             inside = np.ones(len(idx), bool)

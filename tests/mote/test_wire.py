@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 from samba_common.wire import (FLAG_MERGED, FLAG_PREDICTED, FLAG_TRACKED, HEADER, MAX_PACKET,
                                UNLABELLED, MarkerPacket, MoteStatus, PacketError, decode_packet,
                                decode_status, encode_packet, encode_status)
+from samba_common.wire import RECORD_V1
 
 
 def _packet(n: int = 8, seed: int = 0) -> MarkerPacket:
@@ -18,19 +19,45 @@ def _packet(n: int = 8, seed: int = 0) -> MarkerPacket:
                         labels=np.arange(n, dtype=np.uint8),
                         uv=rng.uniform(0, 160, (n, 2)).astype(np.float32),
                         area=rng.integers(0, 60, n).astype(np.uint16),
-                        flags=np.full(n, FLAG_TRACKED, np.uint8))
+                        flags=np.full(n, FLAG_TRACKED, np.uint8),
+                        moments=rng.uniform(-2, 8, (n, 3)).astype(np.float32))
 
 
 def test_round_trip_exact() -> None:
     p = _packet()
     buf = encode_packet(p)
-    assert len(buf) == HEADER.size + 4 + 8 * 12
+    assert len(buf) == HEADER.size + 4 + 8 * 18
     q = decode_packet(buf)
     assert (q.mote_id, q.seq, q.t_ns, q.width, q.height, q.threshold) == ("cam0", 42, p.t_ns, 160, 120, 128)
     np.testing.assert_array_equal(q.uv, p.uv)
     np.testing.assert_array_equal(q.labels, p.labels)
     np.testing.assert_array_equal(q.area, p.area)
     np.testing.assert_array_equal(q.flags, p.flags)
+    # the moments travel as half floats: three significant digits
+    np.testing.assert_allclose(q.moments, p.moments, rtol=1e-3, atol=4e-3)
+
+
+def test_version_1_packets_still_read() -> None:
+    """Recordings made before the moments were carried replay: a version-1 packet (12-byte
+    records) decodes with NaN moments."""
+    p = _packet()
+    head = HEADER.pack(b"SMBM", 1, 0, 8, 42, p.t_ns, 160, 120, 128, 4)
+    rec = np.empty(8, RECORD_V1)
+    rec["label"], rec["flags"], rec["u"], rec["v"], rec["area"] = p.labels, p.flags, p.uv[:, 0], p.uv[:, 1], p.area
+    q = decode_packet(head + b"cam0" + rec.tobytes())
+    np.testing.assert_array_equal(q.uv, p.uv)
+    np.testing.assert_array_equal(q.area, p.area)
+    assert q.moments.shape == (8, 3) and np.isnan(q.moments).all()
+
+
+def test_unmeasured_and_huge_moments_are_nan() -> None:
+    p = _packet(2)
+    p.moments = None
+    assert np.isnan(decode_packet(encode_packet(p)).moments).all()
+    p = _packet(2)
+    p.moments[0] = (1e6, 0.0, 1.0)
+    q = decode_packet(encode_packet(p))
+    assert np.isnan(q.moments[0, 0]) and q.moments[0, 2] == 1.0
 
 
 def test_empty_packet_and_nan_prediction() -> None:
@@ -53,7 +80,7 @@ def test_labelled_uv_drops_merged_and_unlabelled() -> None:
     assert not np.isnan(lab[0]).any() and np.isnan(lab[1]).all() and np.isnan(lab[2:]).all()
 
 
-@pytest.mark.parametrize("cut", [0, 3, HEADER.size - 1, HEADER.size, HEADER.size + 4 + 11])
+@pytest.mark.parametrize("cut", [0, 3, HEADER.size - 1, HEADER.size, HEADER.size + 4 + 17])
 def test_truncated_rejected(cut: int) -> None:
     buf = encode_packet(_packet())
     with pytest.raises(PacketError, match="truncated"):
@@ -108,7 +135,8 @@ def test_fuzz_round_trip_and_mutations(n: int, seq: int, t: int, mid: str, seed:
                      labels=rng.integers(0, 256, n).astype(np.uint8),
                      uv=rng.normal(0, 1000, (n, 2)).astype(np.float32),
                      area=rng.integers(0, 65536, n).astype(np.uint16),
-                     flags=rng.integers(0, 16, n).astype(np.uint8))
+                     flags=rng.integers(0, 16, n).astype(np.uint8),
+                     moments=rng.normal(0, 10, (n, 3)).astype(np.float32))
     buf = encode_packet(p)
     q = decode_packet(buf)
     assert (q.mote_id, q.seq, q.t_ns, len(q)) == (mid, seq, t, n)
@@ -121,8 +149,11 @@ def test_fuzz_round_trip_and_mutations(n: int, seq: int, t: int, mid: str, seed:
             r = decode_packet(cand)
         except PacketError:
             continue
-        again = encode_packet(r)  # the reserved byte 5 is ignored by readers
-        assert again[:5] + again[6:] == cand[:5] + cand[6:]
+        again = decode_packet(encode_packet(r))  # and decodes again to the same
+        assert (again.mote_id, again.seq, again.t_ns, again.width, again.height, again.threshold) == \
+            (r.mote_id, r.seq, r.t_ns, r.width, r.height, r.threshold)
+        for name in ("labels", "uv", "area", "flags", "moments"):
+            np.testing.assert_array_equal(getattr(again, name), getattr(r, name))
 
 
 def test_status_round_trip_and_errors() -> None:

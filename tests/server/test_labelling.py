@@ -434,7 +434,7 @@ def _points_from_blobs(blobs: list) -> Points3D:
     rig = default_rig(4)
     pr = PointReconstructor(rig, Triangulator(rig, TriangulateConfig(max_error_px=1.0)))
     views = [ViewBlobs(np.array(b)[:, :2], np.array(b)[:, 2].astype(np.int64), np.array(b)[:, 3],
-                       np.full(len(b), -1, np.int64)) for b in blobs]
+                       np.full(len(b), -1, np.int64), np.full((len(b), 3), np.nan)) for b in blobs]
     return pr.reconstruct(views)
 
 
