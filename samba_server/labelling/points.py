@@ -34,6 +34,7 @@ near a millisecond.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -63,6 +64,7 @@ class PointsConfig:
     body_radius_m: float = 1.5  #: 2-view points farther than this (horizontally) from the >= 3-view points' median rank lower
     part_px: float = 6.0  #: two single blobs this close in the one view that parts two otherwise merged markers
     ends_min_px: float = 1.0  #: a merged blob whose moments part its markers by less is used by its centroid
+    elongated_px: float = 2.0  #: a blob of a single marker's size whose moments part two markers by this much holds two
 
 
 @dataclass
@@ -281,9 +283,19 @@ class PointReconstructor:
         if not keep:
             return Points3D.empty(C)
         idx = np.array(keep)
-        resolved, placed = self._to_ends(idx, X, err, n_views, blob, uv, views)
+        resolved, placed, new = self._to_ends(idx, X, err, n_views, blob, uv, views)
         self._unshare(idx, X, err, n_views, blob, uv, resolved)
         mirrored = self._mirror(idx, X, err, blob, uv, views, ~placed) | placed
+        if new:  # appended as candidates, as _part does
+            K = len(X)
+            X = np.vstack([X] + [n[0][None] for n in new])
+            err = np.r_[err, [n[1] for n in new]]
+            n_views = np.r_[n_views, [int((n[2] >= 0).sum()) for n in new]]
+            missing = np.r_[missing, np.zeros(len(new), missing.dtype)]
+            blob = np.hstack([blob, np.stack([n[2] for n in new], axis=1)])
+            uv = np.concatenate([uv, np.stack([n[3] for n in new], axis=1)], axis=1)
+            idx = np.r_[idx, K + np.arange(len(new))]
+            mirrored = np.r_[mirrored, np.ones(len(new), bool)]
         X, err, n_views, blob, uv, missing, idx, parted = self._part(idx, X, err, n_views, blob, uv, missing,
                                                                      views, xy, cap)
         mirrored = np.r_[mirrored, np.zeros(len(idx) - len(mirrored), bool)]
@@ -315,62 +327,119 @@ class PointReconstructor:
                         votes, n_merged > 0, merged_all, n_merged, mirrored)
 
     def _to_ends(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
-                 uv: np.ndarray, views: list[ViewBlobs]) -> tuple[set[tuple[int, int]], np.ndarray]:
+                 uv: np.ndarray, views: list[ViewBlobs]) -> tuple[set[tuple[int, int]], np.ndarray, list]:
         """A merged blob's centroid lies between its two markers and pulls every point
         triangulated with it towards the other marker (feet at hip width: both ankle points
         4-6 cm inward). Where the mote sent the blob's second moments, its two markers sit at
         the centroid -+ half the separation they measure (:func:`~.elongation.blob_separation`).
+        A blob counts as two markers here when it is merged (capacity 2) or, of a single
+        marker's size, its moments part two by >= ``elongated_px`` (two overlapping markers).
 
-        - An accepted point with >= 2 single-marker views takes, in each merged view, the end
-          nearest its projection from those views (two such points on one blob take one end
-          each, the nearer way round), when it lies within ``support_px``, and is triangulated
-          again.
-        - A point seen only in merged blobs (a marker hidden behind others wherever it is seen)
-          takes the other end of each blob one such point took; from >= 2 of those views it is
-          triangulated again on them alone: it is then a marker, not two markers' midpoint.
+        - A point with single-marker views takes, in each two-marker view, one end: with >= 2
+          single views, the end nearest its projection from those (within ``support_px``);
+          with one, the combination of ends that triangulates best (>= 3 views, within
+          ``epipolar_px``). An end is taken only where it fits better than the centroid (a
+          single marker blurred by motion is elongated too, and its centroid is right). Two
+          points on one blob take one end each (the nearer one keeps its choice). The point is
+          triangulated again.
+        - A point seen only in two-marker blobs (a marker hidden behind others wherever it is
+          seen) takes the other end of each blob such a point took; from >= 2 of them it is
+          triangulated again on those alone: a marker, no longer two markers' midpoint.
+        - The other marker of a point of the first kind, where no accepted point is (hidden in
+          the views that do not merge it with that point), becomes a new point on the free ends
+          of >= 2 views, when they meet within ``epipolar_px``.
 
         X, err, n_views, uv updated in place (candidate indices). Returns the (view, blob) pairs
-        so resolved and (len(idx),) bool, the points of the second kind placed so."""
+        so resolved, (len(idx),) bool the points placed on ends that stand for one marker (the
+        second kind, and the first kind on an end in every two-marker view), and the new points
+        as (X (3,), error px, blob per view (C,), uv per view (C, 2))."""
         cfg = self.config
         placed = np.zeros(len(idx), bool)
         capb = _blob_capacity(blob[:, idx], views)
-        anchored = (capb == 1).sum(axis=0) >= 2
-        users: dict[tuple[int, int], list[int]] = {}
-        at: dict[int, np.ndarray] = {}  # anchored point -> (3,) from its single-marker views alone
-        for r in np.flatnonzero(anchored & (capb > 1).any(axis=0)):
+        ends: dict[tuple[int, int], np.ndarray | None] = {}
+
+        def ends_of(c: int, b: int) -> np.ndarray | None:
+            if (c, b) not in ends:
+                e = self._blob_ends(views[c], b)
+                if e is not None and views[c].capacity[b] <= 1 and \
+                        float(np.linalg.norm(e[0] - e[1])) < cfg.elongated_px:
+                    e = None
+                ends[(c, b)] = e
+            return ends[(c, b)]
+
+        two = np.zeros(capb.shape, bool)  # (C, len(idx)) views where the point's blob holds two
+        for r in range(len(idx)):
+            for c in np.flatnonzero(capb[:, r] > 0):
+                two[c, r] = ends_of(int(c), int(blob[c, idx[r]])) is not None
+        one = (capb == 1) & ~two
+        # each point's choice of ends: (view, blob) -> (end, px from its projection)
+        choice: dict[int, dict[tuple[int, int], tuple[int, float]]] = {}
+        for r in np.flatnonzero(one.any(axis=0) & two.any(axis=0)):
             k = int(idx[r])
-            res = self._triangulate_views(uv, k, list(np.flatnonzero(capb[:, r] == 1)))
-            if res.n_views[0] < 2:
-                continue
-            at[k] = res.points[0]
-            for c in np.flatnonzero(capb[:, r] > 1):
-                users.setdefault((int(c), int(blob[c, k])), []).append(k)
-        ends: dict[tuple[int, int], np.ndarray] = {}  # (view, blob) -> (2, 2) px
-        free_end: dict[tuple[int, int], int] = {}  # the end no anchored point took
+            cs1, cs2 = list(np.flatnonzero(one[:, r])), [int(c) for c in np.flatnonzero(two[:, r])]
+            keys = [(c, int(blob[c, k])) for c in cs2]
+            got: dict[tuple[int, int], tuple[int, float]] = {}
+            if len(cs1) >= 2:
+                res = self._triangulate_views(uv, k, cs1)
+                if res.n_views[0] < 2:
+                    continue
+                proj = self.tri.project(res.points)[0][:, 0]  # (C, 2)
+                for c, key in zip(cs2, keys):
+                    d = np.linalg.norm(ends[key] - proj[c], axis=1)
+                    j = int(np.argmin(d))
+                    if d[j] <= cfg.support_px and d[j] < float(np.linalg.norm(uv[c, k] - proj[c])):
+                        got[key] = (j, float(d[j]))
+            elif len(cs2) >= 2:
+                # one single view: the ends that meet best
+                cams = cs1 + cs2
+                base = self._triangulate_views(uv, k, cams)
+                best = None
+                for combo in itertools.product((0, 1), repeat=len(cs2)):
+                    sub = uv[:, k:k + 1].copy()
+                    for c, key, j in zip(cs2, keys, combo):
+                        sub[c, 0] = ends[key][j]
+                    res = self._triangulate_views(sub, 0, cams)
+                    if res.n_views[0] == len(cams) and (best is None or res.error[0] < best[0]):
+                        best = (float(res.error[0]), combo, res.points)
+                if best is None or best[0] > cfg.epipolar_px or not best[0] < float(base.error[0]):
+                    continue
+                proj = self.tri.project(best[2])[0][:, 0]
+                for c, key, j in zip(cs2, keys, best[1]):
+                    got[key] = (j, float(np.linalg.norm(ends[key][j] - proj[c])))
+            if got:
+                choice[k] = got
+        # one end per point on a shared blob
+        users: dict[tuple[int, int], list[int]] = {}
+        for k, got in choice.items():
+            for key in got:
+                users.setdefault(key, []).append(k)
+        free_end: dict[tuple[int, int], int] = {}
         moved: set[int] = set()
-        for (c, b), ks in users.items():
-            e = self._blob_ends(views[c], b)
-            if e is None or len(ks) > 2:
+        done: set[tuple[int, int]] = set()
+        for key, ks in users.items():
+            if len(ks) > 2:
                 continue
-            proj = self.tri.project(np.stack([at[k] for k in ks]))[0][c]  # (len(ks), 2)
-            d = np.linalg.norm(proj[:, None, :] - e[None], axis=2)  # (len(ks), 2)
-            if len(ks) == 1:
-                pick = [int(np.argmin(d[0]))]
-                free_end[(c, b)] = 1 - pick[0]
+            ks = sorted(ks, key=lambda k: choice[k][key][1])
+            j0 = choice[ks[0]][key][0]
+            take = [(ks[0], j0)]
+            if len(ks) == 2:
+                if choice[ks[1]][key][0] == j0:
+                    continue  # both want the same end: neither is sure
+                take.append((ks[1], 1 - j0))
             else:
-                pick = [0, 1] if d[0, 0] + d[1, 1] <= d[0, 1] + d[1, 0] else [1, 0]
-            if max(d[i, j] for i, j in enumerate(pick)) > cfg.support_px:
-                free_end.pop((c, b), None)
-                continue  # the ends are not where the points' own views put them
-            for k, j in zip(ks, pick):
-                uv[c, k] = e[j]
+                free_end[key] = 1 - j0
+            for k, j in take:
+                uv[key[0], k] = ends[key][j]
                 moved.add(k)
-            ends[(c, b)] = e
-        for k in moved:
+            done.add(key)
+        for r in np.flatnonzero(np.isin(idx, list(moved))):
+            k = int(idx[r])
             res = self._triangulate_views(uv, k, list(np.flatnonzero(blob[:, k] >= 0)))
             if res.n_views[0] >= 2 and self._plausible(res.points)[0]:
                 X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
-        for r in np.flatnonzero(~anchored & (capb > 1).any(axis=0)):
+                # on an end in every two-marker view: one marker, whatever its blobs' size says
+                placed[r] = all((int(c), int(blob[c, k])) in done for c in np.flatnonzero(two[:, r]))
+        for r in np.flatnonzero(~one.any(axis=0) & two.any(axis=0)):
             k = int(idx[r])
             cs = [int(c) for c in np.flatnonzero(blob[:, k] >= 0) if (int(c), int(blob[c, k])) in free_end]
             if len(cs) < 2:
@@ -378,16 +447,39 @@ class PointReconstructor:
             sub = uv[:, k].copy()
             for c in cs:
                 key = (c, int(blob[c, k]))
-                sub[c] = ends[key][free_end[key]]
+                sub[c] = ends[key][free_end.pop(key)]
             res = self._triangulate_views(sub[:, None, :], 0, cs)
             if res.n_views[0] >= 2 and self._plausible(res.points)[0]:
                 X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
                 uv[:, k] = sub
                 placed[r] = True
-        return set(ends), placed
+        # the other marker of a point on ends, with no point of its own (hidden wherever it is
+        # not merged with that point): a new point on the free ends of >= 2 views
+        new: list[tuple[np.ndarray, float, np.ndarray, np.ndarray]] = []
+        for r in np.flatnonzero(np.isin(idx, list(moved))):
+            k = int(idx[r])
+            cs = [int(c) for c in range(self.C) if blob[c, k] >= 0 and (int(c), int(blob[c, k])) in free_end]
+            if len(cs) < 2:
+                continue
+            sub = np.full((self.C, 2), np.nan)
+            col = np.full(self.C, -1, np.int64)
+            for c in cs:
+                key = (c, int(blob[c, k]))
+                sub[c], col[c] = ends[key][free_end[key]], key[1]
+            res = self._triangulate_views(sub[:, None, :], 0, cs)
+            Y = res.points[0]
+            if res.n_views[0] < 2 or not self._plausible(res.points)[0] or res.error[0] > cfg.epipolar_px:
+                continue
+            others = np.vstack([X[idx]] + [n[0][None] for n in new])
+            if np.min(np.linalg.norm(others - Y, axis=1)) < cfg.min_separation_m:
+                continue  # the marker has a point already
+            for c in cs:
+                free_end.pop((c, int(blob[c, k])))
+            new.append((Y, float(res.error[0]), col, sub))
+        return done, placed, new
 
     def _blob_ends(self, view: ViewBlobs, b: int) -> np.ndarray | None:
-        """(2, 2) px: where the two markers of merged blob b lie (centroid -+ half their measured
+        """(2, 2) px: where the two markers of blob b lie (centroid -+ half their measured
         separation); None without moments or when they part by < ``ends_min_px`` (nearly in
         line with the ray: the centroid is as good as either end)."""
         mom = view.moments[b]
