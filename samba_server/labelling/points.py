@@ -356,21 +356,23 @@ class PointReconstructor:
         cfg = self.config
         placed = np.zeros(len(idx), bool)
         capb = _blob_capacity(blob[:, idx], views)
-        ends: dict[tuple[int, int], np.ndarray | None] = {}
+        # per view: each blob's two ends (B, 2, 2) px, where its moments show two markers
+        sep = [blob_separation(v.moments) for v in views]
+        span = [np.hypot(sp[:, 0], sp[:, 1]) for sp in sep]
+        holds_two = [(sl >= cfg.ends_min_px) & ((v.capacity > 1) | (sl >= cfg.elongated_px))
+                     for v, sl in zip(views, span)]  # NaN moments compare False
+        ends = {}  # (view, blob) -> (2, 2) px, filled as used
 
-        def ends_of(c: int, b: int) -> np.ndarray | None:
+        def ends_of(c: int, b: int) -> np.ndarray:
             if (c, b) not in ends:
-                e = self._blob_ends(views[c], b)
-                if e is not None and views[c].capacity[b] <= 1 and \
-                        float(np.linalg.norm(e[0] - e[1])) < cfg.elongated_px:
-                    e = None
-                ends[(c, b)] = e
+                ends[(c, b)] = views[c].uv[b] + np.array([0.5, -0.5])[:, None] * sep[c][b]
             return ends[(c, b)]
 
+        sub_blob = blob[:, idx]
         two = np.zeros(capb.shape, bool)  # (C, len(idx)) views where the point's blob holds two
-        for r in range(len(idx)):
-            for c in np.flatnonzero(capb[:, r] > 0):
-                two[c, r] = ends_of(int(c), int(blob[c, idx[r]])) is not None
+        for c in range(self.C):
+            has = sub_blob[c] >= 0
+            two[c, has] = holds_two[c][sub_blob[c, has]]
         one = (capb == 1) & ~two
         # each point's choice of ends: (view, blob) -> (end, px from its projection)
         choice: dict[int, dict[tuple[int, int], tuple[int, float]]] = {}
@@ -378,6 +380,8 @@ class PointReconstructor:
             k = int(idx[r])
             cs1, cs2 = list(np.flatnonzero(one[:, r])), [int(c) for c in np.flatnonzero(two[:, r])]
             keys = [(c, int(blob[c, k])) for c in cs2]
+            for key in keys:
+                ends_of(*key)
             got: dict[tuple[int, int], tuple[int, float]] = {}
             if len(cs1) >= 2:
                 res = self._triangulate_views(uv, k, cs1)
@@ -392,20 +396,19 @@ class PointReconstructor:
             elif len(cs2) >= 2:
                 # one single view: the ends that meet best
                 cams = cs1 + cs2
-                base = self._triangulate_views(uv, k, cams)
-                best = None
-                for combo in itertools.product((0, 1), repeat=len(cs2)):
-                    sub = uv[:, k:k + 1].copy()
-                    for c, key, j in zip(cs2, keys, combo):
-                        sub[c, 0] = ends[key][j]
-                    res = self._triangulate_views(sub, 0, cams)
-                    if res.n_views[0] == len(cams) and (best is None or res.error[0] < best[0]):
-                        best = (float(res.error[0]), combo, res.points)
-                if best is None or best[0] > cfg.epipolar_px or not best[0] < float(base.error[0]):
+                combos = np.array(list(itertools.product((0, 1), repeat=len(cs2))))  # (2^M, M)
+                sub = np.full((self.C, len(combos) + 1, 2), np.nan)  # every combination, then the centroids
+                sub[cams, :, :] = uv[cams, k][:, None, :]
+                for i, (c, key) in enumerate(zip(cs2, keys)):
+                    sub[c, :-1] = ends[key][combos[:, i]]
+                res = self.tri.triangulate(sub)
+                e = np.where(res.n_views[:-1] == len(cams), res.error[:-1], np.inf)
+                i = int(np.argmin(e))
+                if not e[i] <= cfg.epipolar_px or not e[i] < res.error[-1]:
                     continue
-                proj = self.tri.project(best[2])[0][:, 0]
-                for c, key, j in zip(cs2, keys, best[1]):
-                    got[key] = (j, float(np.linalg.norm(ends[key][j] - proj[c])))
+                proj = self.tri.project(res.points[i:i + 1])[0][:, 0]
+                for c, key, j in zip(cs2, keys, combos[i]):
+                    got[key] = (int(j), float(np.linalg.norm(ends[key][j] - proj[c])))
             if got:
                 choice[k] = got
         # one end per point on a shared blob
@@ -477,18 +480,6 @@ class PointReconstructor:
                 free_end.pop((c, int(blob[c, k])))
             new.append((Y, float(res.error[0]), col, sub))
         return done, placed, new
-
-    def _blob_ends(self, view: ViewBlobs, b: int) -> np.ndarray | None:
-        """(2, 2) px: where the two markers of blob b lie (centroid -+ half their measured
-        separation); None without moments or when they part by < ``ends_min_px`` (nearly in
-        line with the ray: the centroid is as good as either end)."""
-        mom = view.moments[b]
-        if not np.isfinite(mom).all():
-            return None
-        s = blob_separation(mom)[0]
-        if float(np.hypot(*s)) < self.config.ends_min_px:
-            return None
-        return view.uv[b] + np.array([0.5, -0.5])[:, None] * s
 
     def _unshare(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
                  uv: np.ndarray, resolved: set[tuple[int, int]] = frozenset()) -> None:
