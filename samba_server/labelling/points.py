@@ -356,7 +356,7 @@ class PointReconstructor:
         cfg = self.config
         placed = np.zeros(len(idx), bool)
         capb = _blob_capacity(blob[:, idx], views)
-        # per view: each blob's two ends (B, 2, 2) px, where its moments show two markers
+        # per view: each blob's separation (B, 2) px and whether it holds two markers
         sep = [blob_separation(v.moments) for v in views]
         span = [np.hypot(sp[:, 0], sp[:, 1]) for sp in sep]
         holds_two = [(sl >= cfg.ends_min_px) & ((v.capacity > 1) | (sl >= cfg.elongated_px))
@@ -378,37 +378,8 @@ class PointReconstructor:
         choice: dict[int, dict[tuple[int, int], tuple[int, float]]] = {}
         for r in np.flatnonzero(one.any(axis=0) & two.any(axis=0)):
             k = int(idx[r])
-            cs1, cs2 = list(np.flatnonzero(one[:, r])), [int(c) for c in np.flatnonzero(two[:, r])]
-            keys = [(c, int(blob[c, k])) for c in cs2]
-            for key in keys:
-                ends_of(*key)
-            got: dict[tuple[int, int], tuple[int, float]] = {}
-            if len(cs1) >= 2:
-                res = self._triangulate_views(uv, k, cs1)
-                if res.n_views[0] < 2:
-                    continue
-                proj = self.tri.project(res.points)[0][:, 0]  # (C, 2)
-                for c, key in zip(cs2, keys):
-                    d = np.linalg.norm(ends[key] - proj[c], axis=1)
-                    j = int(np.argmin(d))
-                    if d[j] <= cfg.support_px and d[j] < float(np.linalg.norm(uv[c, k] - proj[c])):
-                        got[key] = (j, float(d[j]))
-            elif len(cs2) >= 2:
-                # one single view: the ends that meet best
-                cams = cs1 + cs2
-                combos = np.array(list(itertools.product((0, 1), repeat=len(cs2))))  # (2^M, M)
-                sub = np.full((self.C, len(combos) + 1, 2), np.nan)  # every combination, then the centroids
-                sub[cams, :, :] = uv[cams, k][:, None, :]
-                for i, (c, key) in enumerate(zip(cs2, keys)):
-                    sub[c, :-1] = ends[key][combos[:, i]]
-                res = self.tri.triangulate(sub)
-                e = np.where(res.n_views[:-1] == len(cams), res.error[:-1], np.inf)
-                i = int(np.argmin(e))
-                if not e[i] <= cfg.epipolar_px or not e[i] < res.error[-1]:
-                    continue
-                proj = self.tri.project(res.points[i:i + 1])[0][:, 0]
-                for c, key, j in zip(cs2, keys, combos[i]):
-                    got[key] = (int(j), float(np.linalg.norm(ends[key][j] - proj[c])))
+            keys = [(int(c), int(blob[c, k])) for c in np.flatnonzero(two[:, r])]
+            got = self._choose_ends(k, list(np.flatnonzero(one[:, r])), keys, uv, [ends_of(*key) for key in keys])
             if got:
                 choice[k] = got
         # one end per point on a shared blob
@@ -480,6 +451,41 @@ class PointReconstructor:
                 free_end.pop((c, int(blob[c, k])))
             new.append((Y, float(res.error[0]), col, sub))
         return done, placed, new
+
+    def _choose_ends(self, k: int, singles: list[int], keys: list[tuple[int, int]], uv: np.ndarray,
+                     ends: list[np.ndarray]) -> dict[tuple[int, int], tuple[int, float]]:
+        """Which end of each of candidate k's two-marker blobs (keys: (view, blob); ends: (2, 2)
+        px each) is its marker, given its single-marker views: {(view, blob): (end, px from the
+        point's projection)}, empty when unclear (see :meth:`_to_ends`). uv: (C, K, 2) px."""
+        cfg = self.config
+        got: dict[tuple[int, int], tuple[int, float]] = {}
+        if len(singles) >= 2:
+            res = self._triangulate_views(uv, k, singles)
+            if res.n_views[0] < 2:
+                return got
+            proj = self.tri.project(res.points)[0][:, 0]  # (C, 2)
+            for (c, b), e in zip(keys, ends):
+                d = np.linalg.norm(e - proj[c], axis=1)
+                j = int(np.argmin(d))
+                if d[j] <= cfg.support_px and d[j] < float(np.linalg.norm(uv[c, k] - proj[c])):
+                    got[(c, b)] = (j, float(d[j]))
+        elif len(keys) >= 2:
+            # one single view: the ends that meet best, every combination and the centroids in one call
+            cams = singles + [c for c, _b in keys]
+            combos = np.array(list(itertools.product((0, 1), repeat=len(keys))))  # (2^M, M)
+            sub = np.full((self.C, len(combos) + 1, 2), np.nan)
+            sub[cams] = uv[cams, k][:, None, :]
+            for i, ((c, _b), e) in enumerate(zip(keys, ends)):
+                sub[c, :-1] = e[combos[:, i]]
+            res = self.tri.triangulate(sub)
+            err = np.where(res.n_views[:-1] == len(cams), res.error[:-1], np.inf)
+            i = int(np.argmin(err))
+            if not (err[i] <= cfg.epipolar_px and err[i] < res.error[-1]):
+                return got
+            proj = self.tri.project(res.points[i:i + 1])[0][:, 0]
+            for (c, b), e, j in zip(keys, ends, combos[i]):
+                got[(c, b)] = (int(j), float(np.linalg.norm(e[j] - proj[c])))
+        return got
 
     def _unshare(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
                  uv: np.ndarray, resolved: set[tuple[int, int]] = frozenset()) -> None:
