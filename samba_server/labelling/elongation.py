@@ -67,8 +67,7 @@ def separation_3d(J: np.ndarray, seps: np.ndarray, prior: np.ndarray, sigma_px: 
     B = np.concatenate([(seps[:, :, None] * signs[:, None, :]).reshape(2 * V, -1) / sigma_px,
                         np.repeat(prior[:, None] / prior_m, signs.shape[1], axis=1)])
     S = np.linalg.lstsq(A, B, rcond=None)[0]  # (3, 2^V)
-    cost = np.sum((A @ S - B) ** 2, axis=0)
-    best = S[:, int(np.argmin(cost))]
+    best = S[:, int(np.argmin(np.sum((A @ S - B) ** 2, axis=0)))]
     if not np.isfinite(best).all() or float(np.linalg.norm(best)) > max_m:
         return None
     return best

@@ -59,8 +59,9 @@ class LabelConfig:
     merged_m: float = 0.02  #: a point seen in a merged blob costs this much more
     unexplained_m: float = 0.03  #: a 2-view point costs this much more per view that should have seen it
     merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it (without blob moments)
-    split_sigma_px: float = 0.5  #: noise of the separation a merged blob's moments measure (inf: moments not used)
+    split_sigma_px: float = float("inf")  #: noise of the separation a merged blob's moments measure, to split two markers on one point by it (inf: off, the default: see docs/labelling.md; 0.5 on the simulator's blobs)
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
+    split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
     wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
@@ -769,26 +770,33 @@ class Labeller:
             off = _guess_split(pred, m, n, cfg.merged_half_m, right)
             if off is None:  # no way to tell which end is which: both stay on the point
                 continue
-            measured = self._measured_split(pts, int(p), 2.0 * off)
+            measured = self._measured_split(pts, int(p), 2.0 * off, np.unique(assign[assign >= 0]))
             if measured is not None:
                 off = 0.5 * measured
             out[m] = out[m] + off
             out[n] = out[n] - off
 
-    def _measured_split(self, pts: Points3D, p: int, prior: np.ndarray) -> np.ndarray | None:
+    def _measured_split(self, pts: Points3D, p: int, prior: np.ndarray, named: np.ndarray) -> np.ndarray | None:
         """The separation (3,) m of the two markers of point p from the moments of its merged
-        blobs (None: no view measured them). prior (3,) m: the guess, sign included."""
+        blobs, when every view saw it merged with measured moments, in blobs no other named point
+        (named: the points markers are named to) uses, and they are >= ``split_min_views`` (else
+        None: the point is not surely the two markers' midpoint, a blob holds a third marker, or
+        the views leave a direction unmeasured). prior (3,) m: the guess, sign included."""
         cfg = self.config
         if not np.isfinite(cfg.split_sigma_px):
             return None
         cams, seps = [], []
         for c, v in enumerate(self._views):
             b = int(pts.blob[c, p]) if c < pts.blob.shape[0] else -1
-            if b < 0 or v.capacity[b] < 2 or not np.isfinite(v.moments[b]).all():
+            if b < 0:
                 continue
+            if v.capacity[b] < 2 or not np.isfinite(v.moments[b]).all():
+                return None  # a view of one marker: the point is not the two markers' midpoint
+            if any(q != p and pts.blob[c, q] == b for q in named):
+                return None  # another named point's blob too: it holds more than these two
             cams.append(c)
             seps.append(blob_separation(v.moments[b])[0])
-        if not cams:
+        if len(cams) < cfg.split_min_views:
             return None
         J = jacobians(lambda P: self.points.tri.project(P)[0], pts.X[p])[cams]
         return separation_3d(J, np.array(seps), prior, cfg.split_sigma_px, cfg.split_prior_m)

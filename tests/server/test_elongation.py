@@ -15,6 +15,7 @@ from samba_mote.sim.motion import DEFAULT_LENGTHS
 from samba_mote.sim.tpose import stance_offset, tpose
 from samba_mote.sim.render import SimConfig, render_frame
 from samba_server.labelling import Labeller
+from samba_server.labelling.labeller import LabelConfig
 from samba_server.labelling.elongation import blob_separation, jacobians, separation_3d
 from samba_server.labelling.rigid import LA, LK, RA, RK
 
@@ -118,12 +119,13 @@ def _merging_packets(rig, markers, t, moments=True, radius_px=1.6, merge_px=4.5,
 @pytest.mark.parametrize("moments", [True, False])
 def test_merged_knees_and_ankles_of_a_hip_width_stance_are_placed_from_the_moments(moments):
     """Feet at hip width (20 cm) seen from 5 m: the knees merge in every view, and the ankles
-    too. From the blobs' moments the four markers are placed within 1.5 cm; without them (a
-    version-1 packet) the split is a guess, at most 8 cm either side of the merged point
-    along the subject's right: here 2 cm off each."""
+    too. With the measured split switched on (``split_sigma_px``; off by default) the four
+    markers are placed within 1.5 cm from the blobs' moments; without moments (a version-1
+    packet) the split is a guess, at most 8 cm either side of the merged point along the
+    subject's right: here 2 cm off each."""
     rig = default_rig(4)
     pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
-    lab = Labeller(rig)
+    lab = Labeller(rig, config=LabelConfig(split_sigma_px=0.5))
     named = None
     for i in range(20):
         named, _q = lab.label(_merging_packets(rig, pose, i / FPS, moments), i / FPS)
