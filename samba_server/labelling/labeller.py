@@ -58,7 +58,7 @@ class LabelConfig:
     hint_m: float = 0.01  #: a view whose mote gave the same label lowers the cost by this
     merged_m: float = 0.02  #: a point seen in a merged blob costs this much more
     unexplained_m: float = 0.03  #: a 2-view point costs this much more per view that should have seen it
-    merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it (without blob moments)
+    merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it (the guess; see split_sigma_px)
     split_sigma_px: float = float("inf")  #: noise of the separation a merged blob's moments measure, to split two markers on one point by it (inf: off, the default: see docs/labelling.md; 0.5 on the simulator's blobs)
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
@@ -756,13 +756,14 @@ class Labeller:
 
     def _split_shared(self, out: np.ndarray, assign: np.ndarray, pts: Points3D, pred: np.ndarray,
                       right: np.ndarray | None) -> None:
-        """Markers named to the same (merged) point: place them either side of it. Where some
-        view's mote measured the merged blob's second moments, the separation is measured
-        (:func:`~.elongation.separation_3d`, the guess of :func:`_guess_split` as its prior);
-        else it is that guess. out (8, 3) in place; assign (8,) point per marker (-1: none);
-        pred (8, 3) the markers' predictions; right (3,) the subject's right or None."""
+        """Markers named to the same (merged) point: place them either side of it, by the guess
+        of :func:`_guess_split`, or (opt-in, ``split_sigma_px``) by their separation measured
+        from the merged blobs' moments (:meth:`_measured_split`, that guess as its prior). out
+        (8, 3) in place; assign (8,) point per marker (-1: none); pred (8, 3) the markers'
+        predictions; right (3,) the subject's right or None."""
         cfg = self.config
-        for p in np.unique(assign[assign >= 0]):
+        named = np.unique(assign[assign >= 0])
+        for p in named:
             ms = np.flatnonzero(assign == p)
             if len(ms) != 2:
                 continue
@@ -770,7 +771,7 @@ class Labeller:
             off = _guess_split(pred, m, n, cfg.merged_half_m, right)
             if off is None:  # no way to tell which end is which: both stay on the point
                 continue
-            measured = self._measured_split(pts, int(p), 2.0 * off, np.unique(assign[assign >= 0]))
+            measured = self._measured_split(pts, int(p), 2.0 * off, named)
             if measured is not None:
                 off = 0.5 * measured
             out[m] = out[m] + off
@@ -787,7 +788,7 @@ class Labeller:
             return None
         cams, seps = [], []
         for c, v in enumerate(self._views):
-            b = int(pts.blob[c, p]) if c < pts.blob.shape[0] else -1
+            b = int(pts.blob[c, p])
             if b < 0:
                 continue
             if v.capacity[b] < 2 or not np.isfinite(v.moments[b]).all():

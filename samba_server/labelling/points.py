@@ -123,6 +123,17 @@ def _blob_capacity(blob: np.ndarray, views: list[ViewBlobs]) -> np.ndarray:
     return out
 
 
+def _appended(arrays: tuple, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, missing: np.ndarray,
+              blob: np.ndarray, uv: np.ndarray) -> tuple:
+    """New candidates appended to the candidate arrays (X (K, 3), err (K,), n_views (K,),
+    missing (K,), blob (C, K), uv (C, K, 2), idx (P,)) and accepted: the grown arrays, in that
+    order. X (n, 3), err, n_views, missing (n,), blob (C, n), uv (C, n, 2): the new ones."""
+    X0, err0, nv0, miss0, blob0, uv0, idx = arrays
+    K = len(X0)
+    return (np.vstack([X0, X]), np.r_[err0, err], np.r_[nv0, n_views], np.r_[miss0, missing],
+            np.hstack([blob0, blob]), np.concatenate([uv0, uv], axis=1), np.r_[idx, K + np.arange(len(X))])
+
+
 def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
@@ -286,15 +297,12 @@ class PointReconstructor:
         resolved, placed, new = self._to_ends(idx, X, err, n_views, blob, uv, views)
         self._unshare(idx, X, err, n_views, blob, uv, resolved)
         mirrored = self._mirror(idx, X, err, blob, uv, views, ~placed) | placed
-        if new:  # appended as candidates, as _part does
-            K = len(X)
-            X = np.vstack([X] + [n[0][None] for n in new])
-            err = np.r_[err, [n[1] for n in new]]
-            n_views = np.r_[n_views, [int((n[2] >= 0).sum()) for n in new]]
-            missing = np.r_[missing, np.zeros(len(new), missing.dtype)]
-            blob = np.hstack([blob, np.stack([n[2] for n in new], axis=1)])
-            uv = np.concatenate([uv, np.stack([n[3] for n in new], axis=1)], axis=1)
-            idx = np.r_[idx, K + np.arange(len(new))]
+        if new:
+            blob_n = np.stack([n[2] for n in new], axis=1)
+            X, err, n_views, missing, blob, uv, idx = _appended(
+                (X, err, n_views, missing, blob, uv, idx), np.stack([n[0] for n in new]),
+                np.array([n[1] for n in new]), (blob_n >= 0).sum(axis=0), np.zeros(len(new), missing.dtype),
+                blob_n, np.stack([n[3] for n in new], axis=1))
             mirrored = np.r_[mirrored, np.ones(len(new), bool)]
         X, err, n_views, blob, uv, missing, idx, parted = self._part(idx, X, err, n_views, blob, uv, missing,
                                                                      views, xy, cap)
@@ -356,17 +364,15 @@ class PointReconstructor:
         cfg = self.config
         placed = np.zeros(len(idx), bool)
         capb = _blob_capacity(blob[:, idx], views)
-        # per view: each blob's separation (B, 2) px and whether it holds two markers
+        # per view: each blob's two ends (B, 2, 2) px and whether it holds two markers
         sep = [blob_separation(v.moments) for v in views]
+        end_px = [v.uv[:, None, :] + np.array([0.5, -0.5])[None, :, None] * sp[:, None, :] for v, sp in zip(views, sep)]
         span = [np.hypot(sp[:, 0], sp[:, 1]) for sp in sep]
         holds_two = [(sl >= cfg.ends_min_px) & ((v.capacity > 1) | (sl >= cfg.elongated_px))
                      for v, sl in zip(views, span)]  # NaN moments compare False
-        ends = {}  # (view, blob) -> (2, 2) px, filled as used
 
-        def ends_of(c: int, b: int) -> np.ndarray:
-            if (c, b) not in ends:
-                ends[(c, b)] = views[c].uv[b] + np.array([0.5, -0.5])[:, None] * sep[c][b]
-            return ends[(c, b)]
+        def ends(key: tuple[int, int]) -> np.ndarray:
+            return end_px[key[0]][key[1]]
 
         sub_blob = blob[:, idx]
         two = np.zeros(capb.shape, bool)  # (C, len(idx)) views where the point's blob holds two
@@ -379,7 +385,7 @@ class PointReconstructor:
         for r in np.flatnonzero(one.any(axis=0) & two.any(axis=0)):
             k = int(idx[r])
             keys = [(int(c), int(blob[c, k])) for c in np.flatnonzero(two[:, r])]
-            got = self._choose_ends(k, list(np.flatnonzero(one[:, r])), keys, uv, [ends_of(*key) for key in keys])
+            got = self._choose_ends(k, list(np.flatnonzero(one[:, r])), keys, uv, [ends(key) for key in keys])
             if got:
                 choice[k] = got
         # one end per point on a shared blob
@@ -403,7 +409,7 @@ class PointReconstructor:
             else:
                 free_end[key] = 1 - j0
             for k, j in take:
-                uv[key[0], k] = ends[key][j]
+                uv[key[0], k] = ends(key)[j]
                 moved.add(k)
             done.add(key)
         for r in np.flatnonzero(np.isin(idx, list(moved))):
@@ -421,7 +427,7 @@ class PointReconstructor:
             sub = uv[:, k].copy()
             for c in cs:
                 key = (c, int(blob[c, k]))
-                sub[c] = ends[key][free_end.pop(key)]
+                sub[c] = ends(key)[free_end.pop(key)]
             res = self._triangulate_views(sub[:, None, :], 0, cs)
             if res.n_views[0] >= 2 and self._plausible(res.points)[0]:
                 X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
@@ -439,7 +445,7 @@ class PointReconstructor:
             col = np.full(self.C, -1, np.int64)
             for c in cs:
                 key = (c, int(blob[c, k]))
-                sub[c], col[c] = ends[key][free_end[key]], key[1]
+                sub[c], col[c] = ends(key)[free_end[key]], key[1]
             res = self._triangulate_views(sub[:, None, :], 0, cs)
             Y = res.points[0]
             if res.n_views[0] < 2 or not self._plausible(res.points)[0] or res.error[0] > cfg.epipolar_px:
@@ -599,16 +605,14 @@ class PointReconstructor:
             new.append((int(k), b2, int(c), int(free[0])))
         if not new:
             return X, err, n_views, blob, uv, missing, idx, parted
-        K = len(X)
-        X = np.vstack([X] + [n[1][None] for n in new])
         src = [n[0] for n in new]
-        err, n_views, missing = np.r_[err, err[src]], np.r_[n_views, n_views[src]], np.r_[missing, missing[src]]
-        blob = np.hstack([blob, blob[:, src]])
-        uv = np.concatenate([uv, uv[:, src]], axis=1)
+        blob_n, uv_n = blob[:, src], uv[:, src]  # the first point's views, but the parting view's free blob
         for j, (_k, _x, c, b) in enumerate(new):
-            blob[c, K + j] = b
-            uv[c, K + j] = views[c].uv[b]
-        idx = np.r_[idx, K + np.arange(len(new))]
+            blob_n[c, j] = b
+            uv_n[c, j] = views[c].uv[b]
+        X, err, n_views, missing, blob, uv, idx = _appended(
+            (X, err, n_views, missing, blob, uv, idx), np.stack([n[1] for n in new]), err[src], n_views[src],
+            missing[src], blob_n, uv_n)
         return X, err, n_views, blob, uv, missing, idx, np.r_[parted, np.ones(len(new), bool)]
 
     def _triangulate_views(self, uv: np.ndarray, k: int, cams: list[int]) -> TriangulationResult:
