@@ -72,7 +72,8 @@ class LabelConfig:
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
     knees_crossed_s: float = 1.0  #: knees crossed (by crossed_m) this long are the legs' names swapped (inf: never)
     arm_swap_s: float = 0.05  #: a shoulder off the shoulder width whose own wrist's point fits it this long swaps with that wrist (inf: never)
-    shin_swap_min: float = 0.5  #: a leg pair is swapped when that mends a broken shin and the other shin is broken by at least this share of the tolerance (inf: never)
+    shin_swap_min: float = 0.5  #: a leg pair is swapped when that mends a broken shin and the other shin is broken by at least this share of the tolerance (inf: never) ...
+    shin_mend_max: float = 0.5  #: ... or when one shin is broken and the swap fits both within this share of it (0: never)
     fit_swap_ratio: float = 0.6  #: names swapped when that brings the 8 markers this much nearer (ratio) a database pose ...
     fit_swap_s: float = 0.05  #: ... the same swap at every check for this long (inf: never) ...
     fit_interval: float = 0.05  #: ... checked this often (s; 0: every frame)
@@ -526,7 +527,9 @@ class Labeller:
         points of their own, one by the tolerance, the other by ``shin_swap_min`` of it, and
         mended by swapping one pair: that pair was swapped (feet parting from a merged point the
         wrong way round). One broken shin beside a good one is a bad point (a knee point off
-        for a frame), not a swap. Swapping the knees or the ankles makes the same two shins, so
+        for a frame), not a swap, unless the swap mends it and fits both shins within
+        ``shin_mend_max`` of the tolerance (a standing ankle between the knees is a shin from
+        both: a swap of the ankles breaks one shin only). Swapping the knees or the ankles makes the same two shins, so
         which pair is wrong comes from the knees' order along the subject's right (3,): knees
         named crossed are the swapped pair (thighs hardly cross, feet often do), else the
         ankles. out (8, 3), assign, arow (8,) in place; nothing when right is None."""
@@ -537,7 +540,8 @@ class Labeller:
         shins = ((LK, LA), (RK, RA))
         errs = sorted(body.shin_error(out[k], out[a]) for k, a in shins)
         mended = [body.shin_error(out[k], out[a]) for k, a in ((LK, RA), (RK, LA))]
-        if errs[0] <= self.config.shin_swap_min * body.tol or errs[1] <= body.tol or max(mended) > body.tol:
+        both_broken = errs[0] > self.config.shin_swap_min * body.tol and max(mended) <= body.tol
+        if errs[1] <= body.tol or not (both_broken or max(mended) <= self.config.shin_mend_max * body.tol):
             return
         pair = (LK, RK) if float((out[RK] - out[LK]) @ right) < 0 else (LA, RA)
         log.debug("t=%.3f s: %s swapped: both shins broken, swapped they fit", self._t_frame, pair)

@@ -576,6 +576,45 @@ def test_a_swapped_ankle_pair_that_breaks_both_shins_is_swapped_back(rule):
 
 
 @pytest.mark.parametrize("rule", [True, False])
+def test_ankles_swapped_where_one_knee_is_a_shin_from_both_are_swapped_back(rule):
+    """A dancer in a plie steps forward (traced on a fresh-set dance, 63.6 % of frames right):
+    the standing ankle sits between the knees, a shin from both, so when the ankles' names
+    swap only the other shin breaks. Swapping them back fits both shins: right again at once
+    with the rule; without it the broken shin's knee is dropped and the swap stays."""
+    from dataclasses import replace
+
+    from samba_server.labelling.rigid import LA, LK, RA, RK
+
+    rig = default_rig(4)
+    stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
+    shin = float(np.linalg.norm(stand[LK] - stand[LA]))
+    step = stand.copy()
+    step[LK] += [0.0, 0.0, -0.05]
+    step[RK] += [0.0, 0.10, -0.05]
+    half = 0.5 * (step[RK] - step[LK])
+    mid = step[LK] + half
+    step[LA] = mid - [0.0, 0.0, np.sqrt(shin ** 2 - half @ half)]  # a shin from both knees
+    dx = float(step[LA, 0]) + 0.02 - float(step[RK, 0])  # the stepping ankle 2 cm right of the standing one
+    step[RA] = step[RK] + [dx, 0.7 * shin, -np.sqrt(shin ** 2 - (0.7 * shin) ** 2 - dx ** 2)]
+    truth = _blend(stand, step, 150, 10, 40)
+    cfg = LabelConfig() if rule else replace(LabelConfig(), shin_mend_max=0.0)
+    lab = Labeller(rig, config=cfg)
+    lab.set_lengths(DEFAULT_LENGTHS)
+    body = lab._body
+    assert body.shin_error(step[LK], step[RA]) > body.tol  # swapped: the left shin broken ...
+    assert body.shin_error(step[RK], step[LA]) < 0.2 * body.tol  # ... the right one fits
+    assert float(step[LA, 0] - step[RA, 0]) < 0.0  # and nothing crossed either way
+    assert float(step[RA, 0] - step[LA, 0]) < LabelConfig().crossed_m
+    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(11), 70, [LA, RA])
+    right = _right(named, truth)
+    assert right[:70].all()
+    if rule:
+        assert right[72:].all()
+    else:
+        assert not right[75:, [LA, RA]].any()
+
+
+@pytest.mark.parametrize("rule", [True, False])
 def test_legs_named_with_the_knees_crossed_for_a_second_are_swapped_back(rule):
     """Crossed feet (a dancer's fifth position: the ankles crossed, the knees not). Both legs'
     names are swapped mid-take (knee and ankle together): the shins fit as well as before, and
