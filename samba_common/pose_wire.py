@@ -54,8 +54,10 @@ FLAG_MARKERS = 0x02  #: the triangulated markers follow the joints
 FLAG_INCOMPLETE = 0x04  #: at least one live mote had no packet in this frame
 FLAG_LABEL_OVERRIDDEN = 0x08  #: the 3D labelling named a blob otherwise than its mote did
 FLAG_SOLVE_SKIPPED = 0x10  #: live: the frame was older than max_lag_ms, so its solve was skipped
+FLAG_LABEL_RENAMED = 0x20  #: the labelling found the names it held until the frame before wrong, and replaced them
 FLAG_NAMES = {FLAG_SOLVED: "solved", FLAG_MARKERS: "markers", FLAG_INCOMPLETE: "incomplete",
-              FLAG_LABEL_OVERRIDDEN: "label_overridden", FLAG_SOLVE_SKIPPED: "solve_skipped"}
+              FLAG_LABEL_OVERRIDDEN: "label_overridden", FLAG_SOLVE_SKIPPED: "solve_skipped",
+              FLAG_LABEL_RENAMED: "label_renamed"}
 
 
 class PoseError(ValueError):

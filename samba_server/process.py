@@ -64,13 +64,18 @@ def _video_frames(cap) -> Iterator[np.ndarray]:
 
 def process_frames(server: Server, names: list[str], frames: list[Iterable[np.ndarray]], fps: float,
                    mote_config=None, progress: Progress | None = None, n_frames: int = 0,
-                   activity=None) -> tuple[np.ndarray, np.ndarray, dict]:
+                   activity=None, both_ways: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
     """Run each camera's frames ((H, W) uint8, in capture order) through its MotePipeline and
     ``server``; frame i of every camera is stamped start + i / fps (see the module docstring).
     ``activity``: optional callable(MarkerPacket) seeing every packet (e.g. a MoteActivity).
+    both_ways: then label the take again backwards and mend the live names where the two
+    passes show them wrong (:mod:`samba_server.both_ways`); ``server`` keeps the forward (live)
+    poses.
 
     Returns joints (F, 13, 3), t (F,) seconds (F = the longest camera, at least ``n_frames``),
-    and extras: markers (F, 8, 3), residual (F,), n_markers (F,), label_margin (F,) metres.
+    and extras: markers (F, 8, 3), residual (F,), n_markers (F,), label_margin (F,) metres;
+    with both_ways also from_backward (F,) bool and live: the forward pass's joints and
+    markers (a dict).
     """
     from samba_common.wire import encode_packet
     from samba_mote.pipeline import MotePipeline
@@ -88,8 +93,19 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     period = 1e9 / fps
     its = [iter(f) for f in frames]
     open_ = [True] * len(its)
+    rig_index = [server.rig.names.index(n) for n in names]
+    kept: list[list] = []  # per frame, per rig camera: the packet (both_ways)
+    renamed_by_seq: dict[int, int] = {}  # pose seq -> the markers its labelling renamed (both_ways)
+
+    def note_renamed(msg) -> None:  # runs right after its frame was labelled: the last quality is that frame's
+        renamed_by_seq[msg.seq] = server.labeller.last_quality.renamed
+
+    if both_ways:
+        server.pose_listeners.append(note_renamed)
     i = 0
     while any(open_):
+        if both_ways:
+            kept.append([None] * len(server.rig.names))
         t_ns = base + int(round(i * period))
         now[0] = t_ns
         for c, it in enumerate(its):
@@ -101,6 +117,8 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
                 server.mote_event(names[c], False, t_ns)
                 continue
             pkt = pipes[c].process(t_ns, frame)
+            if both_ways:
+                kept[-1][rig_index[c]] = pkt
             if activity is not None:
                 activity(pkt)
             server.ingest(names[c], encode_packet(pkt), arrival_ns=t_ns)
@@ -110,23 +128,39 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
             if progress is not None:
                 progress.update(1)
     server.finish()
+    if both_ways:
+        server.pose_listeners.remove(note_renamed)
     n_frames = max(i, n_frames)
     joints = np.full((n_frames, 13, 3), np.nan)
     markers = np.full((n_frames, 8, 3), np.nan)
     residual = np.full(n_frames, np.nan)
     margin = np.full(n_frames, np.nan)
     n_markers = np.zeros(n_frames, int)
+    renamed = np.zeros(n_frames, np.int64)
+    t_live = np.arange(n_frames) / fps  # the server's own frame times (s since its first frame)
     for p in server.poses:
         k = int(round((p.t_ns - base) / period))
         if 0 <= k < n_frames:
             joints[k], markers[k], residual[k], n_markers[k] = p.joints, p.markers, p.residual_m, p.n_markers
-            margin[k] = p.label_margin_m
+            margin[k], renamed[k] = p.label_margin_m, renamed_by_seq.get(p.seq, 0)
+            t_live[k] = (p.t_ns - server.poses[0].t_ns) / 1e9
     t = np.arange(n_frames) / fps
-    return joints, t, {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin}
+    extra = {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin}
+    if both_ways:
+        from .both_ways import PassResult, relabel_both_ways
+
+        kept += [[None] * len(server.rig.names) for _ in range(n_frames - len(kept))]
+        again = relabel_both_ways(server, kept[:n_frames], t_live, PassResult(markers, renamed, margin), progress)
+        if again is not None:
+            live = {"joints": joints, "markers": markers}
+            joints, extra = again
+            extra["live"] = live
+    return joints, t, extra
 
 
 def process_videos(server: Server, videos: list[Path], fps: float, mote_config=None,
-                   progress: Progress | None = None, activity=None) -> tuple[np.ndarray, np.ndarray, dict]:
+                   progress: Progress | None = None, activity=None,
+                   both_ways: bool = False) -> tuple[np.ndarray, np.ndarray, dict]:
     """:func:`process_frames` on one video per camera (camera name = file stem)."""
     import cv2
 
@@ -134,7 +168,7 @@ def process_videos(server: Server, videos: list[Path], fps: float, mote_config=N
     try:
         counts = [int(c.get(cv2.CAP_PROP_FRAME_COUNT)) for c in caps]
         return process_frames(server, [v.stem for v in videos], [_video_frames(c) for c in caps], fps,
-                              mote_config, progress, max(counts, default=0), activity)
+                              mote_config, progress, max(counts, default=0), activity, both_ways)
     finally:
         for cap in caps:
             cap.release()

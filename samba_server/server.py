@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from samba_common.calib import CameraRig
-from samba_common.pose_wire import (FLAG_INCOMPLETE, FLAG_LABEL_OVERRIDDEN, FLAG_SOLVE_SKIPPED, FLAG_SOLVED, PoseMessage,
-                                    encode_pose)
+from samba_common.pose_wire import (FLAG_INCOMPLETE, FLAG_LABEL_OVERRIDDEN, FLAG_LABEL_RENAMED, FLAG_SOLVE_SKIPPED,
+                                    FLAG_SOLVED, PoseMessage, encode_pose)
 from samba_common.skeleton import MARKER_JOINT, N_JOINTS, N_MARKERS
 from samba_common.wire import PacketError, decode_packet
 
@@ -276,11 +276,30 @@ class Server:
         packets = [None] * len(self.rig.names)
         for mote_id, sp in frame.packets.items():
             packets[self._cam_index[mote_id]] = sp.payload
+        return self.label_packets(packets, t)
+
+    def label_packets(self, packets: list, t: float) -> tuple[np.ndarray, int, LabelQuality]:
+        """:meth:`markers_for` on packets: per camera (rig order) a MarkerPacket or None."""
         if self.reconstructor is not None:
             self.labeller.set_lengths(getattr(self.reconstructor, "lengths", None))
         pts, quality = self.labeller.label(packets, t)
         mask = int(sum(1 << i for i in range(N_MARKERS) if np.isfinite(pts[i]).all()))
         return pts, mask, quality
+
+    def solve_markers(self, markers: np.ndarray, t: float) -> tuple[np.ndarray, float]:
+        """Solve the named markers (8, 3) of the frame at t s: ((13, 3) joints, NaN if unsolved;
+        residual m). A solved pose feeds the labelling's predictions; a solver error is logged
+        and leaves the frame unsolved."""
+        joints, residual = np.full((N_JOINTS, 3), np.nan), float("nan")
+        try:
+            r = self.reconstructor.solve(markers, t)
+            joints = np.asarray(r.joints, float)
+            residual = float(r.residual)
+        except Exception:
+            log.exception("solver failed on frame t=%.3f s (frame left unsolved)", t)
+        if np.isfinite(joints).all():
+            self.labeller.observe(t, self._marker_view(joints))
+        return joints, residual
 
     def _frame(self, frame) -> PoseMessage:
         self.stats.frames += 1
@@ -299,19 +318,15 @@ class Server:
             self.stats.solve_skipped += 1
             flags |= FLAG_SOLVE_SKIPPED
         if self.reconstructor is not None and not skip:
-            try:
-                r = self.reconstructor.solve(markers, t)
-                joints = np.asarray(r.joints, float)
-                residual = float(r.residual)
-            except Exception:
-                log.exception("solver failed on frame t=%.3f s (frame left unsolved)", t)
+            joints, residual = self.solve_markers(markers, t)
             self._check_subject(frame.t_ns)
             if np.isfinite(joints).all():
                 flags |= FLAG_SOLVED
                 self.stats.solved += 1
-                self.labeller.observe(t, self._marker_view(joints))
         if not frame.complete:
             flags |= FLAG_INCOMPLETE
+        if quality.renamed:
+            flags |= FLAG_LABEL_RENAMED
         if quality.overridden:
             flags |= FLAG_LABEL_OVERRIDDEN
             self.stats.labels_overridden += quality.overridden

@@ -28,6 +28,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fps", type=float, help="frame rate of the videos (default: read from the files, else 30)")
     ap.add_argument("--record", metavar="TAKE.mcap", help="also record the packets and poses as a take")
     ap.add_argument("--db", help="motion database (.npz) (default: the shipped one)")
+    ap.add_argument("--one-pass", action="store_true",
+                    help="name the markers from the past frames only, as live (samba-server, samba-replay) does. "
+                         "Default: the take is also labelled backwards, and names the live pass itself corrected "
+                         "later (or never gave, as after a blackout) come from the backward pass; --record keeps "
+                         "the live poses")
     add_placement_arg(ap)
     ap.add_argument("--config", help="server TOML (default: the packaged configs/server.toml)")
     ap.add_argument("--mote-config", help="mote TOML for detection/tracking (default: built-in defaults)")
@@ -67,11 +72,13 @@ def main(argv: list[str] | None = None) -> int:
             total = max(total, int(cap.get(cv2.CAP_PROP_FRAME_COUNT)))
             cap.release()
         activity = MoteActivity(server.rig.names)
-        with Progress(total, "samba-process") as bar:
-            joints, t, extra = process_videos(server, videos, fps, mote_config, bar, activity)
+        with Progress(total * (1 if args.one_pass else 2), "samba-process") as bar:  # both ways: two passes
+            joints, t, extra = process_videos(server, videos, fps, mote_config, bar, activity,
+                                              both_ways=not args.one_pass)
         if server.recorder is not None:
             server.recorder.close()
         subject = server.subject
+        extra.pop("live", None)  # the forward pass alone: what samba-server gives live
         save_joints(args.out, joints, t, **extra, **(subject.metadata() if subject is not None else {}))
     except (VideoError, CalibrationError, ConfigError, RecorderError, OSError, ValueError) as exc:
         print(f"samba-process: {exc}", file=sys.stderr)

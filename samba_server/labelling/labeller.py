@@ -107,7 +107,9 @@ class LabelQuality:
     named marker's assignment cost and its runner-up's (metres; identification margins are
     converted at 0.1 m per score unit); residual_m: rms distance between named markers and
     their predictions; mode: "tracking", "identified" or "lost"; overridden: named markers
-    whose blob a mote had labelled otherwise.
+    whose blob a mote had labelled otherwise; renamed: bit m set when marker m's name, held
+    until the frame before, was found wrong in this one and replaced (a swap rule, an audit or an
+    identification), 0 when none was.
     """
 
     n_labelled: int = 0
@@ -116,6 +118,7 @@ class LabelQuality:
     residual_m: float = float("nan")
     mode: str = "lost"
     overridden: int = 0
+    renamed: int = 0
 
 
 @dataclass
@@ -123,7 +126,8 @@ class LabelStats:
     """Counters of one run: frames, frames with >= 2 points, identifications (first and
     re-acquisitions), overridden mote labels, each re-acquisition's delay (s) from the
     first frame with points after the labels were lost to the frame they came back, audits of
-    the tracked names by a fresh identification and how many of them replaced the names."""
+    the tracked names by a fresh identification and how many of them replaced the names, frames
+    whose names replaced wrong ones (:attr:`LabelQuality.renamed`)."""
 
     frames: int = 0
     frames_with_points: int = 0
@@ -133,6 +137,7 @@ class LabelStats:
     first_identified_t: float | None = None
     audits: int = 0
     audit_switches: int = 0
+    renames: int = 0
 
 
 class Labeller:
@@ -158,6 +163,10 @@ class Labeller:
         self._t_facing = -np.inf
         self._centres: list[tuple[float, np.ndarray]] = []
         self._t_good = -np.inf          # last frame where tracking explained the points
+        self._named_last = False        # the frame before had a name
+        self._renamed = 0               # bit m: marker m's name replaced as wrong this frame (LabelQuality.renamed)
+        #: the quality of the last frame labelled
+        self.last_quality = LabelQuality()
         self._t_lost: float | None = None  # first frame with points after the labels were lost
         self._t_ambiguous: float | None = None
         #: (since, last frame's time, (8, 3) markers) of an unclear identification's best labelling
@@ -214,6 +223,15 @@ class Labeller:
     def label(self, packets: list, t: float) -> tuple[np.ndarray, LabelQuality]:
         """Name the markers of one frame. packets: per camera (rig order) a MarkerPacket or None;
         t: seconds. Returns ((8, 3) world metres, NaN = not named; quality)."""
+        self._renamed = 0
+        out, q = self._label(packets, t)
+        q.renamed = self._renamed
+        self.stats.renames += int(self._renamed != 0)
+        self.last_quality = q
+        self._named_last = bool(np.isfinite(out).all(axis=1).any())
+        return out, q
+
+    def _label(self, packets: list, t: float) -> tuple[np.ndarray, LabelQuality]:
         self.stats.frames += 1
         self._t_prev, self._t_frame = self._t_frame, t
         self._views = [view_blobs(p) for p in packets]
@@ -250,6 +268,7 @@ class Labeller:
         found = self._identify(pts, t)
         if found is not None:
             out, q = found
+            self._renamed = _ALL if self._named_last else 0  # names tracking still held, replaced
             self._update(out, t, reset=True)
             self._t_good = t
         else:
@@ -356,6 +375,7 @@ class Labeller:
                 slack = 0.02 if any(stale[m] for pair in crossed for m in pair) else -0.005
                 if self._body.shin_misfit(swapped) <= self._body.shin_misfit(out) + slack:
                     for lm, rm in crossed:
+                        self._renamed |= (1 << lm) | (1 << rm)
                         assign[[lm, rm]], arow[[lm, rm]], out[[lm, rm]] = assign[[rm, lm]], arow[[rm, lm]], out[[rm, lm]]
             self._uncross_knees(out, assign, arow, right, t)
         self._split_shared(out, assign, pts, pred, right)
@@ -627,6 +647,7 @@ class Labeller:
         """Swap the names of each (m, n) marker pair: out (8, 3), assign, arow (8,) in place, and
         the tracks (position, velocity, last seen) with them, so their velocities carry on."""
         for m, n in pairs:
+            self._renamed |= (1 << m) | (1 << n)
             for a in (out, assign, arow, self._pos, self._vel, self._seen):
                 a[[m, n]] = a[[n, m]]
 
@@ -657,6 +678,7 @@ class Labeller:
                 log.debug("t=%.3f s: a wrist held a shoulder width from the other shoulder for %.2f s: "
                           "renamed its shoulder", t, t - hist[0][0])
                 out[S], out[W] = out[W], np.nan
+                self._renamed |= (1 << S) | (1 << W)
                 assign[S], assign[W] = assign[W], -1
                 self._seen[W] = -np.inf
                 self._pos[W] = np.nan
@@ -731,6 +753,8 @@ class Labeller:
         elif best.score - tracked < need:
             return None
         self.stats.audit_switches += 1
+        if not extends:  # the names taken from the points tracking gave them
+            self._renamed = int(sum(1 << m for m in np.flatnonzero((assign >= 0) & (best.labels != assign))))
         log.debug("t=%.3f s: tracked names replaced by an identification (score %.2f over %s)", t, best.score,
                   "no shoulders" if tracked is None else f"{tracked:.2f}")
         out = self._named(pts, best.labels, best.facing)
@@ -926,6 +950,8 @@ def _guess_split(pred: np.ndarray, m: int, n: int, half: float, right: np.ndarra
 
 #: per side: (its shoulder, its wrist, the other shoulder)
 _ARMS = ((LS, LW, RS), (RS, RW, LS))
+#: LabelQuality.renamed with every marker's bit set
+_ALL = (1 << N_MARKERS) - 1
 
 
 def _permutations(swaps: tuple[tuple[tuple[int, int], ...], ...]) -> np.ndarray:

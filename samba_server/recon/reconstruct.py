@@ -183,6 +183,7 @@ class Reconstructor:
                  lengths: np.ndarray | None = None, offsets: np.ndarray | None = None):
         self.db = db if db is not None else load_default_db()
         self.config = config or ReconstructConfig()
+        self._given = (lengths, offsets)
         cfg = self.config
         rng = np.random.default_rng(cfg.seed)
         sigma = np.full(kernels.N_ANGLES, np.radians(cfg.ball_sigma_deg))
@@ -212,6 +213,13 @@ class Reconstructor:
         if lengths is not None:
             self.set_lengths(lengths)
             self.subject = Subject(self.lengths, self.offsets, None, "skin" if np.any(self.offsets) else "joint_centres")
+
+    def again(self, subject: Subject | None = None) -> "Reconstructor":
+        """A new solver, without state, built as this one was (database, configuration, the
+        subject given at construction), or for ``subject`` (its lengths and offsets) when given."""
+        if subject is not None:
+            return Reconstructor(self.db, self.config, subject.lengths, subject.offsets)
+        return Reconstructor(self.db, self.config, *self._given)
 
     # --- subject -------------------------------------------------------------------------
     def set_lengths(self, lengths: np.ndarray) -> None:

@@ -529,16 +529,19 @@ def _blend(a: np.ndarray, b: np.ndarray, n: int, start: int, frames: int) -> np.
     s = np.clip((np.arange(n) - start) / frames, 0.0, 1.0)[:, None, None]
     return a[None] + s * (b - a)[None]
 
-def _run_swapping_tracks(lab, rig, truth, rng, at: int, markers: list[int]) -> np.ndarray:
+def _run_swapping_tracks(lab, rig, truth, rng, at: int, markers: list[int], renamed: list | None = None) -> np.ndarray:
     """Label truth (F, 8, 3) frame by frame; before frame ``at`` the tracks (position,
-    velocity) of ``markers`` are reversed in order (a swap injected into tracking). (F, 8, 3)."""
+    velocity) of ``markers`` are reversed in order (a swap injected into tracking). (F, 8, 3);
+    each frame's ``LabelQuality.renamed`` is appended to ``renamed`` when given."""
     named = []
     for i, m in enumerate(truth):
         if i == at:
             for a in (lab._pos, lab._vel):
                 a[markers] = a[markers[::-1]]
-        got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
+        got, q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
         named.append(got)
+        if renamed is not None:
+            renamed.append(q.renamed)
     return np.array(named)
 
 
@@ -558,7 +561,7 @@ def test_a_swapped_ankle_pair_that_breaks_both_shins_is_swapped_back(rule):
     stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
     raised = _legs_pose(np.array([0.06, 0.22]), np.array([0.08, 0.0]), left_knee_lift=0.3)
     truth = _blend(stand, raised, 120, 10, 40)
-    cfg = LabelConfig() if rule else replace(LabelConfig(), shin_swap_min=float("inf"))
+    cfg = LabelConfig() if rule else replace(LabelConfig(), shin_swap_min=float("inf"), shin_mend_max=0.0)
     lab = Labeller(rig, config=cfg)
     lab.set_lengths(DEFAULT_LENGTHS)
     body = lab._body
@@ -605,13 +608,17 @@ def test_ankles_swapped_where_one_knee_is_a_shin_from_both_are_swapped_back(rule
     assert body.shin_error(step[RK], step[LA]) < 0.2 * body.tol  # ... the right one fits
     assert float(step[LA, 0] - step[RA, 0]) < 0.0  # and nothing crossed either way
     assert float(step[RA, 0] - step[LA, 0]) < LabelConfig().crossed_m
-    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(11), 70, [LA, RA])
+    renamed: list[int] = []
+    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(11), 70, [LA, RA], renamed)
     right = _right(named, truth)
     assert right[:70].all()
     if rule:
         assert right[72:].all()
+        # the frame that swapped them back says so, for the ankles only (the pose flag label_renamed)
+        assert [(i, r) for i, r in enumerate(renamed) if r] == [(70, (1 << LA) | (1 << RA))]
     else:
         assert not right[75:, [LA, RA]].any()
+        assert not any(renamed)
 
 
 @pytest.mark.parametrize("rule", [True, False])

@@ -47,16 +47,19 @@ def _run_process(tmp_path, capsys):
     assert "marker placement: joint centres (auto: standard pose" in capsys.readouterr().err
     assert str(np.load(out)["subject_placement"]) == "joint_centres"
     # the user overrides it: --placement skin is what the solver uses, and a replay of the
-    # recording places the markers as the recording server did
+    # recording places the markers as the recording server did; --one-pass output is the live
+    # one, so the replay equals it
     told, told_take, replayed = tmp_path / "told.npz", tmp_path / "told.mcap", tmp_path / "replayed.npz"
     assert main([str(calib), *map(str, videos), "--out", str(told), "--fps", "30", "--placement", "skin",
-                 "--record", str(told_take)]) == 0
+                 "--record", str(told_take), "--one-pass"]) == 0
+    assert "from_backward" not in np.load(told)
     assert "marker placement: skin (given: --placement" in capsys.readouterr().err
     assert str(np.load(told)["subject_placement"]) == "skin"
     assert replay_main([str(told_take), "--out", str(replayed)]) == 0
     assert str(np.load(replayed)["subject_placement"]) == "skin"
     np.testing.assert_array_equal(load_joints(replayed).joints, load_joints(told).joints)
     got = load_joints(out)
+    assert np.load(out)["from_backward"].shape == (len(joints),)  # labelled from both ends by default
     assert got.joints.shape == joints.shape  # one row per video frame
     np.testing.assert_allclose(got.t, np.arange(len(joints)) / FPS)
     clean, _ = reconstruct_take(joints[:, list(MARKER_JOINT)], t)

@@ -1,0 +1,188 @@
+"""Offline labelling from both ends of a take (``samba-process``; ``--one-pass`` turns it off).
+
+Live, the names of a frame come from the frames before it only. Right after a blackout, or
+once the subject walks back into view, they come from one identification of the 3D points
+(:mod:`samba_server.labelling.identify`): a dancer's crossed legs, or a subject who turned
+during the blackout, can be named the mirror way round, and tracking keeps the wrong names
+until a rule catches them, up to a second later (measured on the labelling benchmark: 39 % of
+the frames with a wrong or missing name were in the second after a blackout).
+
+Offline the later frames are known too. The take is labelled a second time, backwards in time
+(the same :class:`~samba_server.server.Server` code on the packets in reverse order, with the
+subject the forward pass measured from its standard pose), so each frame has two namings:
+one tracked from the past, one from the future. The forward (live) naming stays, except:
+
+- where the forward pass itself found its names wrong within ``window_s`` (1 s) after the
+  frame (``label_renamed``: a swap rule, an audit or a re-identification replaced them), the
+  backward names agree with the corrected ones at that frame, and the backward pass did not
+  find its own wrong within ``window_s`` before it, the frame takes the backward names (the
+  names a pass corrects were wrong for a while before the correction; a rename the backward
+  pass does not confirm may itself be the mistake);
+- where the forward pass names nothing and the backward names are not doubted so, the frame
+  takes the backward names (the wait for a clear identification after a blackout).
+
+A naming that neither pass corrected is not overruled by the other: the backward pass starts
+mid-motion at the end of the take, with no standard pose, and its first identification is
+the weaker one (tried: preferring the pass that had tracked longer lost 17 points on a take
+whose backward identification named the legs the wrong way round). The chosen markers are
+then solved forwards by a new solver built as the live one, so the output is the live
+solver's pose of the chosen names.
+
+The recording (``--record``) keeps the live, forward-only poses: ``samba-replay`` of it
+equals it.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from samba_common.skeleton import N_JOINTS, N_MARKERS
+
+from .server import Server, ServerConfig
+
+log = logging.getLogger(__name__)
+
+__all__ = ["PassResult", "backward_pass", "choose", "relabel_both_ways"]
+
+
+@dataclass
+class PassResult:
+    """One labelling pass over F frames. markers: (F, 8, 3) world m (NaN = not named);
+    renamed: (F,) int, bit m set where the pass found marker m's name, held until the frame
+    before, wrong and replaced it (``LabelQuality.renamed``); margin: (F,) label margin m."""
+
+    markers: np.ndarray
+    renamed: np.ndarray
+    margin: np.ndarray
+
+
+def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=None) -> PassResult | None:
+    """Label the frames again from the last to the first with a twin of ``server`` (same rig,
+    labelling and triangulation configuration, solver built for the subject ``server``
+    measured). packets: per frame (F) a list per rig camera of MarkerPacket or None; t: (F,)
+    s; progress: optional, updated once per frame. None when the forward pass measured no
+    subject (never identified)."""
+    rec = server.reconstructor
+    subject = getattr(server, "subject", None)
+    if rec is None or subject is None or not hasattr(rec, "again"):
+        return None
+    twin = Server(server.rig, None, rec.again(subject), ServerConfig(max_lag_ms=0.0, keep_history=False),
+                  tri_config=server.triangulator.config, label_config=server.labeller.config)
+    F = len(t)
+    out = PassResult(np.full((F, N_MARKERS, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan))
+    t_end = float(t[-1]) if F else 0.0
+    for k in range(F - 1, -1, -1):
+        tb = t_end - float(t[k])  # backwards time runs forwards
+        markers, _mask, q = twin.label_packets(packets[k], tb)
+        out.markers[k], out.margin[k], out.renamed[k] = markers, q.margin_m, q.renamed
+        twin.solve_markers(markers, tb)
+        if progress is not None:
+            progress.update(1)
+    return out
+
+
+def _doubted(renamed: np.ndarray, named: np.ndarray, t: np.ndarray, window_s: float, forward: bool) -> np.ndarray:
+    """(F,) int, bit m set on the frames whose name for marker m the pass itself replaced as
+    wrong within window_s s later in its own direction of travel (forward: later frames;
+    backward: earlier ones), with some name in every frame between (a pass that lost every
+    name has none to correct). renamed: (F,) int bits; named: (F,) bool; t: (F,) s."""
+    F = len(t)
+    out = np.zeros(F, np.int64)
+    t_fix = np.full(N_MARKERS, np.nan)  # per marker: when the pass last renamed it
+    order = range(F - 1, -1, -1) if forward else range(F)  # walk against the pass's direction
+    for k in order:
+        if not named[k]:
+            t_fix[:] = np.nan
+            continue
+        live = np.abs(t_fix - t[k]) <= window_s
+        out[k] = _bits(live)
+        t_fix[_mask(int(renamed[k]))] = t[k]
+    return out
+
+
+def _bits(mask: np.ndarray) -> int:
+    """(8,) bool -> int bit set."""
+    return int(sum(1 << int(m) for m in np.flatnonzero(mask)))
+
+
+def _mask(bits: int) -> np.ndarray:
+    """int bit set -> (8,) bool."""
+    return (bits >> np.arange(N_MARKERS)) & 1 == 1
+
+
+def _doubles(markers: np.ndarray) -> int:
+    """Pairs of named markers (8, 3) within 1 cm of each other: one point named twice."""
+    named = markers[np.isfinite(markers).all(axis=1)]
+    d = np.linalg.norm(named[:, None] - named[None], axis=2)
+    return int(np.count_nonzero(np.triu(d <= 0.01, 1)))
+
+
+def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame and marker the forward name, or the backward one where the forward pass
+    doubted its own (a rename the backward naming confirms: the renamed markers, or every
+    marker where the two namings agree as a whole at the rename) and the backward pass names
+    it and did not doubt it (with the markers the forward pass left unnamed in that frame), and
+    every name of a frame the forward pass names nothing in (see the module docstring).
+    A frame whose mixed names would name one point twice more often than the forward names
+    keeps the forward ones. Returns ((F, 8, 3) markers, (F,) bool: a name taken from the
+    backward pass)."""
+    nf = np.isfinite(fwd.markers).all(axis=2)
+    nb = np.isfinite(bwd.markers).all(axis=2)
+    close = np.linalg.norm(np.nan_to_num(fwd.markers - bwd.markers), axis=2) <= 0.01
+    same = (nf & nb & close) | (~nf & ~nb)  # (F, 8) the two passes name marker m alike
+    # a rename is confirmed for the markers it renamed that the backward pass, tracking them
+    # there (not renaming them itself), names at the same points; when it is confirmed for all
+    # of them and the two namings agree as a whole (>= 4 markers named by both, none named
+    # otherwise), for every marker
+    agree = np.array([_bits(row) for row in nf & nb & close]) & ~bwd.renamed.astype(np.int64)
+    renamed = fwd.renamed.astype(np.int64)
+    whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
+    confirmed = np.where(whole & (renamed != 0), _bits(np.ones(N_MARKERS, bool)), renamed & agree)
+    doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True)
+    doubt_b = _doubted(bwd.renamed.astype(np.int64), nb.any(axis=1), t, window_s, forward=False)
+    markers = fwd.markers.copy()
+    from_b = np.zeros(len(t), bool)
+    for k in range(len(t)):
+        if not nf[k].any():
+            if nb[k].any() and not doubt_b[k]:
+                markers[k], from_b[k] = bwd.markers[k], True
+            continue
+        sure_b = nb[k] & ~_mask(int(doubt_b[k]))  # backward names, not doubted
+        take = _mask(int(doubt_f[k])) & sure_b & ~same[k]
+        if not take.any():
+            continue
+        take |= ~nf[k] & sure_b  # a naming found wrong in part: its gaps are filled in too
+        mixed = markers[k].copy()
+        mixed[take] = bwd.markers[k][take]
+        if _doubles(mixed) <= _doubles(fwd.markers[k]):
+            markers[k], from_b[k] = mixed, True
+    return markers, from_b
+
+
+def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: PassResult,
+                      progress=None) -> tuple[np.ndarray, dict] | None:
+    """The two-way labelling of a take the forward (live) pass ``server`` has processed.
+    packets: per frame (F) a list per rig camera of MarkerPacket or None; t: (F,) s; fwd: the
+    forward pass's names; progress: optional, updated once per frame of the backward pass.
+    Returns ((F, 13, 3) joints, extras as process_frames gives them, plus ``from_backward``
+    (F,) bool), or None when there is no second pass (no subject measured, no solver)."""
+    bwd = backward_pass(server, packets, t, progress)
+    if bwd is None:
+        log.info("no subject measured: labelled forwards only")
+        return None
+    markers, take_b = choose(fwd, bwd, t)
+    log.info("two-way labelling: %d of %d frames named from the backward pass", int(take_b.sum()), len(t))
+    final = Server(server.rig, None, server.reconstructor.again(), ServerConfig(max_lag_ms=0.0, keep_history=False),
+                   tri_config=server.triangulator.config, label_config=server.labeller.config)
+    F = len(t)
+    joints = np.full((F, N_JOINTS, 3), np.nan)
+    residual = np.full(F, np.nan)
+    for k in range(F):
+        joints[k], residual[k] = final.solve_markers(markers[k], float(t[k]))
+    extra = {"markers": markers, "residual": residual,
+             "n_markers": np.isfinite(markers).all(axis=2).sum(axis=1),
+             "label_margin": np.where(take_b, bwd.margin, fwd.margin), "from_backward": take_b}
+    return joints, extra

@@ -1,0 +1,132 @@
+"""Offline labelling from both ends of a take (samba_server/both_ways.py): the backward pass
+is the real labelling and solver run on the packets in reverse order."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from samba_common.calib import default_rig
+from samba_common.skeleton import MARKER_JOINT
+from samba_common.wire import UNLABELLED, MarkerPacket
+from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
+from samba_server.both_ways import PassResult, choose, relabel_both_ways
+from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
+from samba_server.recon.reconstruct import Reconstructor
+from samba_server.server import Server, ServerConfig
+
+FPS = 60.0
+MIRROR = [RS, LS, RW, LW, RK, LK, RA, LA]  # names of the mirror image, by marker
+
+
+def _packets(rig, markers: np.ndarray, t: float, rng) -> list[MarkerPacket]:
+    """One unlabelled MarkerPacket per camera: markers (8, 3) projected, NaN rows unseen."""
+    out = []
+    seen = np.isfinite(markers).all(axis=1)
+    for cam in rig.cameras:
+        uv = cam.project(np.where(seen[:, None], markers, 0.0))[seen] + rng.normal(0, 0.1, (int(seen.sum()), 2))
+        out.append(MarkerPacket(cam.name, 0, int(t * 1e9), 160, 120, 100, np.full(len(uv), UNLABELLED, np.uint8),
+                                uv.astype(np.float32), np.full(len(uv), 9, np.uint16),
+                                np.zeros(len(uv), np.uint8)))
+    return out
+
+
+def _take(seconds: float = 4.0, blackout: tuple[int, int] = (110, 140)):
+    """Markers (F, 8, 3) of the synthetic motion with a blackout (frames [a, b) unseen), the
+    packets per frame, t (F,) s, and the forward (live) pass over them with its server."""
+    rig = default_rig(4)
+    joints, t = synthetic_motion(seconds, FPS)
+    truth = joints[:, list(MARKER_JOINT)]
+    rng = np.random.default_rng(5)
+    packets = []
+    for k in range(len(t)):
+        m = truth[k] if not blackout[0] <= k < blackout[1] else np.full((8, 3), np.nan)
+        packets.append(_packets(rig, m, float(t[k]), rng))
+    server = Server(rig, None, Reconstructor(lengths=DEFAULT_LENGTHS), ServerConfig(max_lag_ms=0.0))
+    F = len(t)
+    fwd = PassResult(np.full((F, 8, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan))
+    for k in range(F):
+        fwd.markers[k], _mask, q = server.label_packets(packets[k], float(t[k]))
+        fwd.renamed[k], fwd.margin[k] = q.renamed, q.margin_m
+        server.solve_markers(fwd.markers[k], float(t[k]))
+    return truth, packets, t, server, fwd
+
+
+def _right(named: np.ndarray, truth: np.ndarray) -> np.ndarray:
+    """(F,) bool: every marker named and within 2 cm of its truth."""
+    return (np.linalg.norm(named - truth, axis=2) <= 0.02).all(axis=1)
+
+
+def test_a_mirror_naming_after_a_blackout_is_replaced_by_the_backward_one():
+    """After a blackout the forward pass names the mirror image (as a dancer who turned in the
+    dark is named) for 0.4 s until a later check renames the markers. The backward pass reaches
+    those frames tracking from the end of the take: the output takes its names there, keeps the
+    forward ones where both agree, and solves every frame."""
+    truth, packets, t, server, fwd = _take()
+    assert _right(fwd.markers[:110], truth[:110]).mean() > 0.95  # the forward pass itself is right
+    wrong = np.arange(142, 166)  # from the first identification after the blackout for 0.4 s
+    bad = PassResult(fwd.markers.copy(), fwd.renamed.copy(), fwd.margin.copy())
+    bad.markers[wrong] = fwd.markers[wrong][:, MIRROR]
+    bad.renamed[wrong[-1] + 1] = 0xFF  # renamed by an audit 0.4 s later
+    assert not _right(bad.markers[wrong], truth[wrong]).any()
+    joints, extra = relabel_both_ways(server, packets, t, bad)
+    assert _right(extra["markers"][wrong], truth[wrong]).all()
+    assert extra["from_backward"][wrong].all()
+    assert not extra["from_backward"][:100].any()  # agreed: the forward names stay
+    out = ~np.isin(np.arange(len(t)), np.arange(110, 145))
+    assert np.isfinite(joints[out]).all()
+    err = np.linalg.norm(joints[wrong][:, list(MARKER_JOINT)] - truth[wrong], axis=2)
+    assert err.max() < 0.1  # the pose follows the backward names
+
+
+def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
+    """Two namings differ up to frame 200 and agree after it. The forward one stays, except in
+    the second before the forward pass renamed its markers at 200 to what the backward pass
+    names (there the backward one is taken, for the markers renamed), unless the backward pass
+    renamed its own in the second after; a rename the backward pass does not confirm (names
+    otherwise, or renamed itself at that frame) changes nothing; a frame the forward pass names
+    nothing in takes the backward names."""
+    F = 301
+    t = np.arange(F) / FPS
+    a = np.zeros((F, 8, 3))
+    b = a.copy()
+    b[:200] += 0.5
+    ren_f, ren_b = np.zeros(F, np.int64), np.zeros(F, np.int64)
+    fwd, bwd = PassResult(a, ren_f, np.zeros(F)), PassResult(b, ren_b, np.zeros(F))
+    markers, from_b = choose(fwd, bwd, t)
+    assert not from_b.any() and np.allclose(markers, 0.0)  # nobody doubted: the live names
+    ren_f[200] = 0xFF  # forward found its names wrong at frame 200, and renamed them as backward does
+    _m, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 200))
+    ren_b[150] = 0xFF  # backward found its own wrong at 150: its names after it are doubted
+    _m, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 151))
+    ren_b[150] = 0
+    ren_b[200] = 0xFF  # the backward pass renamed them at the same frame: its names there are no check
+    _m, from_b = choose(fwd, bwd, t)
+    assert not from_b.any()
+    ren_b[200] = 0
+    b[200:] += 0.5  # the backward pass names otherwise after the rename too: not confirmed
+    _m, from_b = choose(fwd, bwd, t)
+    assert not from_b.any()
+    b[200:] -= 0.5
+    b[200:, [LW, RW]] += 0.3  # the namings agree on all but the wrists at the rename ...
+    ren_f[200] = (1 << LA) | (1 << RA)  # ... that swapped the ankles only: only they are taken
+    b[:200, [LA, RA]] = b[:200, [RA, LA]] + [[0.0, 0.0, 0.1], [0.0, 0.0, 0.2]]
+    b[150, LA] = np.nan  # a name the backward pass does not give is not taken away
+    markers, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 200))
+    assert np.allclose(markers[150, LA], 0.0)
+    b[150, LA] = b[149, LA]
+    markers, from_b = choose(fwd, bwd, t)
+    assert np.allclose(markers[140:200, [LA, RA]], b[140:200, [LA, RA]]) and np.allclose(markers[140:200, :LA], 0.0)
+    ren_f[200] = 0xFF  # renamed every marker: all but the wrists are confirmed
+    markers, from_b = choose(fwd, bwd, t)
+    others = [LS, RS, LK, RK, LA, RA]
+    assert np.allclose(markers[140:200, others], b[140:200, others]) and np.allclose(markers[140:200, [LW, RW]], 0.0)
+    b[200:, [LW, RW]] -= 0.3  # agreeing as a whole: every marker the backward way
+    markers, from_b = choose(fwd, bwd, t)
+    assert np.allclose(markers[140:200], b[140:200])
+    ren_f[200] = 0
+    a[20:30] = np.nan  # forward names nothing: the backward names fill in
+    markers, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(20, 30)) and np.array_equal(markers[20:30], b[20:30])
