@@ -12,12 +12,15 @@ Offline the later frames are known too. The take is labelled a second time, back
 subject the forward pass measured from its standard pose), so each frame has two namings:
 one tracked from the past, one from the future. The forward (live) naming stays, except:
 
-- where the forward pass itself found its names wrong within ``window_s`` (1 s) after the
-  frame (``label_renamed``: a swap rule, an audit or a re-identification replaced them), the
-  backward names agree with the corrected ones at that frame, and the backward pass did not
-  find its own wrong within ``window_s`` before it, the frame takes the backward names (the
-  names a pass corrects were wrong for a while before the correction; a rename the backward
-  pass does not confirm may itself be the mistake);
+- where the forward pass itself found a marker's name wrong within ``window_s`` (1 s) after
+  the frame (``LabelQuality.renamed``: a swap rule, an audit or a re-identification replaced
+  it), the backward pass names that marker at the same point at the rename (tracking it, not
+  renaming it itself), and the backward pass did not find its own name for it wrong within
+  ``window_s`` before the frame, the frame takes the backward name, and the backward names of
+  the markers the forward pass left unnamed; every marker's when the two namings agree as a
+  whole at the rename. The names a pass corrects were wrong for a while before the
+  correction; a rename the backward pass does not confirm may itself be the mistake. A mix
+  that would name one point twice keeps the forward names;
 - where the forward pass names nothing and the backward names are not doubted so, the frame
   takes the backward names (the wait for a clear identification after a blackout).
 
