@@ -44,6 +44,7 @@ import numpy as np
 
 from samba_common.skeleton import N_JOINTS, N_MARKERS
 
+from .labelling import bit_markers, marker_bits
 from .server import Server, ServerConfig
 
 log = logging.getLogger(__name__)
@@ -101,19 +102,9 @@ def _doubted(renamed: np.ndarray, named: np.ndarray, t: np.ndarray, window_s: fl
             t_fix[:] = np.nan
             continue
         live = np.abs(t_fix - t[k]) <= window_s
-        out[k] = _bits(live)
-        t_fix[_mask(int(renamed[k]))] = t[k]
+        out[k] = marker_bits(live)
+        t_fix[bit_markers(renamed[k])] = t[k]
     return out
-
-
-def _bits(mask: np.ndarray) -> int:
-    """(8,) bool -> int bit set."""
-    return int(sum(1 << int(m) for m in np.flatnonzero(mask)))
-
-
-def _mask(bits: int) -> np.ndarray:
-    """int bit set -> (8,) bool."""
-    return (bits >> np.arange(N_MARKERS)) & 1 == 1
 
 
 def _doubles(markers: np.ndarray) -> int:
@@ -140,10 +131,10 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     # there (not renaming them itself), names at the same points; when it is confirmed for all
     # of them and the two namings agree as a whole (>= 4 markers named by both, none named
     # otherwise), for every marker
-    agree = np.array([_bits(row) for row in nf & nb & close]) & ~bwd.renamed.astype(np.int64)
+    agree = marker_bits(nf & nb & close) & ~bwd.renamed.astype(np.int64)
     renamed = fwd.renamed.astype(np.int64)
     whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
-    confirmed = np.where(whole & (renamed != 0), _bits(np.ones(N_MARKERS, bool)), renamed & agree)
+    confirmed = np.where(whole & (renamed != 0), marker_bits(np.ones(N_MARKERS, bool)), renamed & agree)
     doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True)
     doubt_b = _doubted(bwd.renamed.astype(np.int64), nb.any(axis=1), t, window_s, forward=False)
     markers = fwd.markers.copy()
@@ -153,8 +144,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
             if nb[k].any() and not doubt_b[k]:
                 markers[k], from_b[k] = bwd.markers[k], True
             continue
-        sure_b = nb[k] & ~_mask(int(doubt_b[k]))  # backward names, not doubted
-        take = _mask(int(doubt_f[k])) & sure_b & ~same[k]
+        sure_b = nb[k] & ~bit_markers(doubt_b[k])  # backward names, not doubted
+        take = bit_markers(doubt_f[k]) & sure_b & ~same[k]
         if not take.any():
             continue
         take |= ~nf[k] & sure_b  # a naming found wrong in part: its gaps are filled in too

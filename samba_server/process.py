@@ -138,12 +138,13 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     n_markers = np.zeros(n_frames, int)
     renamed = np.zeros(n_frames, np.int64)
     t_live = np.arange(n_frames) / fps  # the server's own frame times (s since its first frame)
+    t0_ns = server.poses[0].t_ns if server.poses else base
     for p in server.poses:
         k = int(round((p.t_ns - base) / period))
         if 0 <= k < n_frames:
             joints[k], markers[k], residual[k], n_markers[k] = p.joints, p.markers, p.residual_m, p.n_markers
             margin[k], renamed[k] = p.label_margin_m, renamed_by_seq.get(p.seq, 0)
-            t_live[k] = (p.t_ns - server.poses[0].t_ns) / 1e9
+            t_live[k] = (p.t_ns - t0_ns) / 1e9
     t = np.arange(n_frames) / fps
     extra = {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin}
     if both_ways:

@@ -29,7 +29,7 @@ from samba_common.skeleton import MARKER_JOINT, N_JOINTS, N_MARKERS
 from samba_common.wire import PacketError, decode_packet
 
 from .record import Recorder
-from .labelling import LabelConfig, Labeller, LabelQuality
+from .labelling import LabelConfig, Labeller, LabelQuality, marker_bits
 from .sync import FrameSync, SyncConfig, SyncPacket
 from .triangulate import TriangulateConfig, Triangulator
 
@@ -283,7 +283,7 @@ class Server:
         if self.reconstructor is not None:
             self.labeller.set_lengths(getattr(self.reconstructor, "lengths", None))
         pts, quality = self.labeller.label(packets, t)
-        mask = int(sum(1 << i for i in range(N_MARKERS) if np.isfinite(pts[i]).all()))
+        mask = marker_bits(np.isfinite(pts).all(axis=1))
         return pts, mask, quality
 
     def solve_markers(self, markers: np.ndarray, t: float) -> tuple[np.ndarray, float]:

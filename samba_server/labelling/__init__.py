@@ -15,6 +15,6 @@ The data path of one frame (:class:`~samba_server.labelling.labeller.Labeller`):
    lengths allow and choosing by geometry, anatomy, facing and recent motion.
 """
 
-from .labeller import Labeller, LabelConfig, LabelQuality
+from .labeller import Labeller, LabelConfig, LabelQuality, bit_markers, marker_bits
 
-__all__ = ["Labeller", "LabelConfig", "LabelQuality"]
+__all__ = ["Labeller", "LabelConfig", "LabelQuality", "bit_markers", "marker_bits"]

@@ -567,7 +567,8 @@ class Labeller:
         if errs[1] <= body.tol or not (both_broken or one_mended):
             return
         pair = (LK, RK) if float((out[RK] - out[LK]) @ right) < 0 else (LA, RA)
-        log.debug("t=%.3f s: %s swapped: both shins broken, swapped they fit", self._t_frame, pair)
+        log.debug("t=%.3f s: %s swapped: %s, swapped both fit", self._t_frame, pair,
+                  "both shins broken" if both_broken else "one shin broken")
         self._swap([pair], out, assign, arow)
 
     def _swap_arms(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, t: float) -> None:
@@ -757,7 +758,7 @@ class Labeller:
             return None
         self.stats.audit_switches += 1
         if not extends:  # the names taken from the points tracking gave them
-            self._renamed = int(sum(1 << m for m in np.flatnonzero((assign >= 0) & (best.labels != assign))))
+            self._renamed = marker_bits((assign >= 0) & (best.labels != assign))
         log.debug("t=%.3f s: tracked names replaced by an identification (score %.2f over %s)", t, best.score,
                   "no shoulders" if tracked is None else f"{tracked:.2f}")
         out = self._named(pts, best.labels, best.facing)
@@ -953,8 +954,22 @@ def _guess_split(pred: np.ndarray, m: int, n: int, half: float, right: np.ndarra
 
 #: per side: (its shoulder, its wrist, the other shoulder)
 _ARMS = ((LS, LW, RS), (RS, RW, LS))
+
+
+def marker_bits(named: np.ndarray) -> int | np.ndarray:
+    """Bit set of markers (bit m = marker m, as ``marker_mask`` and :attr:`LabelQuality.renamed`)
+    from named (8,) bool: an int; (F, 8): an (F,) int64 array."""
+    bits = (np.asarray(named, np.int64) << np.arange(N_MARKERS)).sum(axis=-1)
+    return int(bits) if np.ndim(bits) == 0 else bits
+
+
+def bit_markers(bits: int) -> np.ndarray:
+    """(8,) bool: the markers whose bit is set (inverse of :func:`marker_bits`)."""
+    return (int(bits) >> np.arange(N_MARKERS)) & 1 == 1
+
+
 #: LabelQuality.renamed with every marker's bit set
-_ALL = (1 << N_MARKERS) - 1
+_ALL = marker_bits(np.ones(N_MARKERS, bool))
 
 
 def _permutations(swaps: tuple[tuple[tuple[int, int], ...], ...]) -> np.ndarray:
