@@ -17,8 +17,9 @@ share of confident frames (a pose from >= 4 named markers) with a joint > 20 cm 
 brackets: the same share when the solver is fed the true markers, i.e. what the solver alone
 gets wrong) and with a marker-carrying joint > 20 cm off (what wrong names cause),
 re-acquisition time after the blackout, the longest pose output into the blackout, and MPJPE
-next to the same take reconstructed live from the true markers (same database and solver,
-same blackout).
+next to the same take reconstructed from the true markers (same database and solver, same
+blackout, solved the same way: forwards and backwards merged, or forwards only with
+--one-pass).
 
     python benchmarks/labelling.py [--data ../shared/data/cmu-bvh] [--cameras 4 2] [--codec mjpg]
 """
@@ -43,6 +44,7 @@ from samba_common.skeleton import MARKER_JOINT  # noqa: E402
 from samba_mote.sim.render import SimConfig  # noqa: E402
 from samba_mote.sim.take import load_motion, make_take, prepare_motion  # noqa: E402
 from samba_server.app import load_server_configs  # noqa: E402
+from samba_server.both_ways import solve_both_ways  # noqa: E402
 from samba_server.labelling.score import score_take, separable_visible  # noqa: E402
 from samba_server.process import process_videos  # noqa: E402
 from samba_server.recon.db import MotionDB, build_db  # noqa: E402
@@ -72,14 +74,19 @@ KINDS = {"tuned": TUNED, "checked": CHECKED, "unseen": UNSEEN, "fresh": FRESH}
 CLIPS = TUNED + CHECKED + UNSEEN + FRESH
 
 
-def true_marker_reference(truth: np.ndarray, t: np.ndarray, blackout: np.ndarray, db, n_lead: int
-                          ) -> tuple[float, float]:
-    """The live solver fed the true markers (NaN in the blackout): MPJPE over the motion frames
-    and the share of solved frames with a joint > 20 cm off (what the solver alone gets wrong)."""
+def true_marker_reference(truth: np.ndarray, t: np.ndarray, blackout: np.ndarray, db, n_lead: int,
+                          both_ways: bool) -> tuple[float, float]:
+    """The solver fed the true markers (NaN in the blackout), solved as the scored output is
+    (both_ways: forwards and backwards, merged, as samba-process; else forwards, as live): MPJPE
+    over the motion frames and the share of solved frames with a joint > 20 cm off (what the
+    solver alone gets wrong)."""
     rec = Reconstructor(db=db)
     markers = truth[:, list(MARKER_JOINT)].copy()
     markers[blackout] = np.nan
-    est = np.array([rec.solve(m, float(tt)).joints for m, tt in zip(markers, t)])
+    if both_ways:
+        est = solve_both_ways(rec, markers, t)[0]
+    else:
+        est = np.array([rec.solve(m, float(tt)).joints for m, tt in zip(markers, t)])
     ok = np.isfinite(est).all(axis=(1, 2))
     err = np.linalg.norm(est - truth, axis=-1)
     far = float((np.nanmax(np.where(ok[:, None], err, 0.0), axis=1) > 0.2)[ok].mean()) if ok.any() else float("nan")
@@ -140,7 +147,8 @@ def main() -> int:
             live = extra.get("live", {"markers": extra["markers"], "joints": est})  # the forward pass: samba-server's
             s_live = score_take(live["markers"][:F], live["joints"][:F], take.joints[:F], vis, blackout, cfg.fps,
                                 take.n_tpose)
-            ref, ref_far = true_marker_reference(take.joints[:F], take.t[:F], blackout, db, take.n_tpose)
+            ref, ref_far = true_marker_reference(take.joints[:F], take.t[:F], blackout, db, take.n_tpose,
+                                                 not args.one_pass)
             reacq = ", ".join("never" if not np.isfinite(r) else f"{r:.2f}" for r in s.reacquire_s) or "-"
             kind = next((k for k, clips in KINDS.items() if clip in clips), "unseen")
             rows.append(f"| {clip} ({kind}) | {n_cam} | {F} | {100 * s.correct:.1f} ({100 * s_live.correct:.1f}) | {s.wrong_frames} | "

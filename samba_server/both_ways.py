@@ -28,8 +28,8 @@ A naming that neither pass corrected is not overruled by the other: the backward
 mid-motion at the end of the take, with no standard pose, and its first identification is
 the weaker one (tried: preferring the pass that had tracked longer lost 17 points on a take
 whose backward identification named the legs the wrong way round). The chosen markers are
-then solved forwards by a new solver built as the live one, so the output is the live
-solver's pose of the chosen names.
+then solved forwards by a new solver built as the live one and backwards by one for the
+subject it measured, the two merged per frame (:func:`solve_both_ways`).
 
 The recording (``--record``) keeps the live, forward-only poses: ``samba-replay`` of it
 equals it.
@@ -45,6 +45,7 @@ import numpy as np
 from samba_common.skeleton import N_JOINTS, N_MARKERS
 
 from .labelling import bit_markers, marker_bits
+from .recon.reconstruct import PoseResult, merge_passes
 from .server import Server, ServerConfig
 
 log = logging.getLogger(__name__)
@@ -156,6 +157,35 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     return markers, from_b
 
 
+def _solve_pass(rec, markers: np.ndarray, t: np.ndarray, order) -> list:
+    """rec.solve over the frames in ``order`` (PoseResult per frame, by frame index); a solver
+    error is logged and leaves the frame unsolved."""
+    out: list = [None] * len(t)
+    for k in order:
+        try:
+            out[k] = rec.solve(markers[k], float(t[k]))
+        except Exception:
+            log.exception("solver failed on frame t=%.3f s (frame left unsolved)", abs(float(t[k])))
+            out[k] = PoseResult(np.full((N_JOINTS, 3), np.nan), float("nan"), 0, 0, "unsolved")
+    return out
+
+
+def solve_both_ways(rec, markers: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Solve the chosen markers (F, 8, 3) at t (F,) s forwards with ``rec`` (a fresh solver built
+    as the live one: it measures the subject from the standard pose), then backwards with a
+    solver for the subject it measured, and merge the two per frame
+    (:func:`~samba_server.recon.reconstruct.merge_passes`, as samba-reconstruct does): the
+    temporal model sees the future too. Returns ((F, 13, 3) joints, (F,) residual m)."""
+    F = len(t)
+    fwd = _solve_pass(rec, markers, t, range(F))
+    results = fwd
+    joints = np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3)
+    if rec.subject is not None and F > 1:
+        bwd = _solve_pass(rec.again(rec.subject), markers, -np.asarray(t, float), range(F - 1, -1, -1))
+        joints, results = merge_passes(fwd, bwd, rec.lengths)
+    return joints, np.array([r.residual for r in results], float)
+
+
 def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: PassResult,
                       progress=None) -> tuple[np.ndarray, dict] | None:
     """The two-way labelling of a take the forward (live) pass ``server`` has processed.
@@ -169,13 +199,7 @@ def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: P
         return None
     markers, take_b = choose(fwd, bwd, t)
     log.info("two-way labelling: %d of %d frames named from the backward pass", int(take_b.sum()), len(t))
-    final = Server(server.rig, None, server.reconstructor.again(), ServerConfig(max_lag_ms=0.0, keep_history=False),
-                   tri_config=server.triangulator.config, label_config=server.labeller.config)
-    F = len(t)
-    joints = np.full((F, N_JOINTS, 3), np.nan)
-    residual = np.full(F, np.nan)
-    for k in range(F):
-        joints[k], residual[k] = final.solve_markers(markers[k], float(t[k]))
+    joints, residual = solve_both_ways(server.reconstructor.again(), markers, t)
     extra = {"markers": markers, "residual": residual,
              "n_markers": np.isfinite(markers).all(axis=2).sum(axis=1),
              "label_margin": np.where(take_b, bwd.margin, fwd.margin), "from_backward": take_b}

@@ -412,6 +412,27 @@ def _merge(a: PoseResult, b: PoseResult, lengths: np.ndarray) -> np.ndarray:
     return fk(0.5 * (oa + ob), R, d, lengths)
 
 
+def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarray
+                 ) -> tuple[np.ndarray, list[PoseResult]]:
+    """Merge a forward and a backward solve of the same F frames: ((F, 13, 3) joints, the
+    PoseResult kept per frame). Where both passes solved a frame from its markers, the mean of
+    their states (:func:`_merge`, bone lengths ``lengths`` (8,) m); where only the backward pass
+    did, its pose; elsewhere the forward pass's (its bridges included). A backward bridge is
+    never used: it would invent poses up to ``max_gap`` before the markers come back, i.e. deep
+    into a blackout, where the forward bridge is already as far as a guess may go."""
+    F = len(fwd)
+    joints = np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3)
+    results = list(fwd)
+    for i, (a, b) in enumerate(zip(fwd, bwd)):
+        if b.status != "solved":
+            continue
+        if a.status == "solved" and a.state is not None and b.state is not None:
+            joints[i] = _merge(a, b, lengths)
+        elif a.status != "solved":
+            joints[i], results[i] = b.joints, b
+    return joints, results
+
+
 def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = None,
                      config: ReconstructConfig | None = None, lengths: np.ndarray | None = None,
                      progress=None, both_ways: bool = True,
@@ -442,13 +463,7 @@ def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = N
         # time runs backwards: feed -t so the solver sees increasing times
         bwd = _run(Reconstructor(db, config, lengths, offsets), markers, -np.asarray(t, float), np.arange(F)[::-1], progress)
         n_solves += F
-        for i in range(F):
-            a, b = fwd[i], bwd[i]
-            if a.status != "unsolved" and b.status != "unsolved":
-                joints[i] = _merge(a, b, lengths)
-            elif b.status != "unsolved":
-                joints[i] = b.joints
-        results = [a if a.status != "unsolved" else b for a, b in zip(fwd, bwd)]
+        joints, results = merge_passes(fwd, bwd, lengths)
     elapsed = time.perf_counter() - t0
     info = {"residual": np.array([r.residual for r in results]),
             "n_markers": np.array([r.n_markers for r in results], np.int16),
