@@ -67,6 +67,7 @@ class LabelConfig:
     wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
     glued_wrist_s: float = 0.3  #: a wrist held a shoulder width from the other shoulder this long, its own shoulder unnamed, is that shoulder
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
+    wrist_clear_m: float = 0.15  #: a lost wrist found within its arm's reach must be this far from every named marker
     max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast ...
     turn_slack_deg: float = 45.0  #: ... plus this much (noise of the shoulder points) between labellings
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
@@ -441,6 +442,7 @@ class Labeller:
         doubt = np.where((pts.n_views[free] < 3) & (pts.unexplained[free] > 0), cfg.unexplained_m, 0.0)
         cost = np.full((len(free), len(lost)), np.inf)
         right = None if self._facing is None else right_of(self._facing)
+        moving = None
         for j, m in enumerate(lost):
             if np.isfinite(pred[m]).all():
                 d = np.linalg.norm(X - pred[m], axis=1)
@@ -451,6 +453,20 @@ class Labeller:
                 if assign[other] >= 0:
                     d = np.linalg.norm(X - (named[other] + sign * body.shoulder_width * right), axis=1)
                     anchor = np.where(d <= 3 * body.tol, d, np.inf)
+            if m in (LW, RW) and lost.size == 1:
+                # the one marker unnamed, a wrist: anywhere within its arm's reach, if nearer
+                # its own shoulder than the other one (else at a cost), clear of the named
+                # markers (a point hugging one is more likely its ghost) and not a static
+                # reflection: a wrist lost where its prediction went wrong (hands together on a
+                # sword hilt) is found again
+                own, other = (LS, RS) if m == LW else (RS, LS)
+                ds = np.linalg.norm(X - named[own], axis=1)
+                do = np.linalg.norm(X - named[other], axis=1)
+                clear = np.min(np.linalg.norm(X[:, None] - np.delete(named, m, axis=0)[None], axis=2), axis=1)
+                if moving is None:
+                    moving = self._moving(X, self._t_frame)
+                anchor = np.where((ds <= body.reach + body.tol) & (clear >= cfg.wrist_clear_m) & moving,
+                                  cfg.wrist_side_w * np.maximum(0.0, ds - do), np.inf)
             for knee, ankle in ((LK, LA), (RK, RA)):
                 if m == ankle and assign[knee] >= 0:
                     e = np.abs(np.linalg.norm(X - named[knee], axis=1) - body.shin)
