@@ -137,7 +137,10 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
     confirmed = np.where(whole & (renamed != 0), marker_bits(np.ones(N_MARKERS, bool)), renamed & agree)
     doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True)
-    doubt_b = _doubted(bwd.renamed.astype(np.int64), nb.any(axis=1), t, window_s, forward=False)
+    # and the other way round: a backward rename counts where the forward pass names those
+    # markers at the same points (tracking them, not renaming them)
+    agree_b = marker_bits(nf & nb & close) & ~renamed
+    doubt_b = _doubted(bwd.renamed.astype(np.int64) & agree_b, nb.any(axis=1), t, window_s, forward=False)
     markers = fwd.markers.copy()
     from_b = np.zeros(len(t), bool)
     for k in range(len(t)):

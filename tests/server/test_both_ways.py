@@ -82,7 +82,7 @@ def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
     """Two namings differ up to frame 200 and agree after it. The forward one stays, except in
     the second before the forward pass renamed its markers at 200 to what the backward pass
     names (there the backward one is taken, for the markers renamed), unless the backward pass
-    renamed its own in the second after; a rename the backward pass does not confirm (names
+    renamed its own in the second after to names the forward pass confirms; a rename the backward pass does not confirm (names
     otherwise, or renamed itself at that frame) changes nothing; a frame the forward pass names
     nothing in takes the backward names."""
     F = 301
@@ -97,10 +97,13 @@ def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
     ren_f[200] = 0xFF  # forward found its names wrong at frame 200, and renamed them as backward does
     _m, from_b = choose(fwd, bwd, t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 200))
-    ren_b[150] = 0xFF  # backward found its own wrong at 150: its names after it are doubted
+    ren_b[150] = 0xFF  # backward found its own wrong at 150, to names the forward pass does not
+    _m, from_b = choose(fwd, bwd, t)  # give there: not confirmed, no doubt
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 200))
+    a[150] = b[150]  # confirmed (the forward pass names them so there): its names after it are doubted
     _m, from_b = choose(fwd, bwd, t)
-    assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 151))
-    ren_b[150] = 0
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 150))
+    a[150], ren_b[150] = 0.0, 0
     ren_b[200] = 0xFF  # the backward pass renamed them at the same frame: its names there are no check
     _m, from_b = choose(fwd, bwd, t)
     assert not from_b.any()
