@@ -16,7 +16,8 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   the frame (``LabelQuality.renamed``: a swap rule, an audit or a re-identification replaced
   it), the backward pass names that marker at the same point at the rename (tracking it, not
   renaming it itself), and the backward pass did not find its own name for it wrong within
-  ``window_s`` before the frame, the frame takes the backward name, and the backward names of
+  ``window_s`` before the frame (a backward rename the forward naming confirms likewise), the
+  frame takes the backward name, and the backward names of
   the markers the forward pass left unnamed; every marker's when the two namings agree as a
   whole at the rename. The names a pass corrects were wrong for a while before the
   correction; a rename the backward pass does not confirm may itself be the mistake. A mix
