@@ -819,11 +819,32 @@ class Labeller:
             off = _guess_split(pred, m, n, cfg.merged_half_m, right)
             if off is None:  # no way to tell which end is which: both stay on the point
                 continue
+            if (m, n) == (LW, RW) and right is not None:
+                off = self._wrists_split(out, pred, off, _guess_split(pred, m, n, cfg.merged_half_m, None))
             measured = self._measured_split(pts, int(p), 2.0 * off, named)
             if measured is not None:
                 off = 0.5 * measured
             out[m] = out[m] + off
             out[n] = out[n] - off
+
+    def _wrists_split(self, out: np.ndarray, pred: np.ndarray, lateral: np.ndarray,
+                      tracked: np.ndarray | None) -> np.ndarray:
+        """Two wrists on one point (hands together): the left one's half separation (3,) m,
+        either along the subject's right (``lateral``: hands side by side, as in a clap) or
+        along their tracks' predictions (``tracked``: one hand above the other on a hilt),
+        whichever puts the eight markers nearer a body of the motion database (``pose_fit``;
+        unnamed markers at their predictions). out, pred (8, 3)."""
+        if tracked is None or self.pose_fit is None:
+            return lateral
+        base = np.where(np.isfinite(out).all(axis=1)[:, None], out, pred)
+        if not np.isfinite(base).all():
+            return lateral
+        cand = np.repeat(base[None], 2, axis=0)
+        for i, off in enumerate((lateral, tracked)):
+            cand[i, LW] += off
+            cand[i, RW] -= off
+        dist = self.pose_fit(cand)
+        return tracked if float(dist[1]) < float(dist[0]) else lateral
 
     def _measured_split(self, pts: Points3D, p: int, prior: np.ndarray, named: np.ndarray) -> np.ndarray | None:
         """The separation (3,) m of the two markers of point p from the moments of its merged

@@ -904,3 +904,29 @@ def test_an_unclear_identification_that_stays_the_same_is_taken_without_the_full
         assert first <= round(0.05 * FPS) + 1
     else:
         assert first >= round(0.2 * FPS)
+
+
+def test_two_wrists_on_one_point_split_the_way_the_database_prefers():
+    """Hands together on a sword hilt, one above the other, merged into one point: the two
+    names are put either side of it along the subject's right (as hands clapping) or along
+    their tracks (one above the other), whichever set of markers lies nearer a body of the
+    motion database (``pose_fit``); without a database, along the subject's right."""
+    from samba_server.labelling.labeller import _guess_split
+    from samba_server.labelling.rigid import LW, RW
+
+    pose = tpose(DEFAULT_LENGTHS)[list(MARKER_JOINT)]
+    hilt = pose[[0, 1]].mean(axis=0) + [0.0, 0.4, -0.3]
+    truth = pose.copy()
+    truth[LW], truth[RW] = hilt + [0, 0, 0.06], hilt - [0, 0, 0.06]  # left hand above
+    out, pred = truth.copy(), truth.copy()
+    out[[LW, RW]] = hilt  # one merged point
+    right = np.array([1.0, 0.0, 0.0])  # the subject faces +Y
+    lateral = _guess_split(pred, LW, RW, 0.08, right)
+    tracked = _guess_split(pred, LW, RW, 0.08, None)
+    lab = Labeller(default_rig(4))
+    assert np.allclose(lab._wrists_split(out, pred, lateral, tracked), lateral)  # no database
+    lab.pose_fit = lambda sets: np.linalg.norm(sets - truth, axis=2).mean(axis=1)
+    off = lab._wrists_split(out, pred, lateral, tracked)
+    assert np.allclose(off, tracked) and off[2] > 0  # the left hand above, as it is
+    truth[LW], truth[RW] = hilt - 0.06 * right, hilt + 0.06 * right  # side by side: lateral wins
+    assert np.allclose(lab._wrists_split(out, pred, lateral, tracked), lateral)
