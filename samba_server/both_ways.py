@@ -46,7 +46,7 @@ import numpy as np
 from samba_common.skeleton import N_JOINTS, N_MARKERS
 
 from .labelling import bit_markers, marker_bits
-from .recon.reconstruct import PoseResult, merge_passes
+from .recon.reconstruct import merge_passes, solve_frames
 from .server import Server, ServerConfig
 
 log = logging.getLogger(__name__)
@@ -161,19 +161,6 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     return markers, from_b
 
 
-def _solve_pass(rec, markers: np.ndarray, t: np.ndarray, order) -> list:
-    """rec.solve over the frames in ``order`` (PoseResult per frame, by frame index); a solver
-    error is logged and leaves the frame unsolved."""
-    out: list = [None] * len(t)
-    for k in order:
-        try:
-            out[k] = rec.solve(markers[k], float(t[k]))
-        except Exception:
-            log.exception("solver failed on frame t=%.3f s (frame left unsolved)", abs(float(t[k])))
-            out[k] = PoseResult(np.full((N_JOINTS, 3), np.nan), float("nan"), 0, 0, "unsolved")
-    return out
-
-
 def solve_both_ways(rec, markers: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Solve the chosen markers (F, 8, 3) at t (F,) s forwards with ``rec`` (a fresh solver built
     as the live one: it measures the subject from the standard pose), then backwards with a
@@ -181,11 +168,11 @@ def solve_both_ways(rec, markers: np.ndarray, t: np.ndarray) -> tuple[np.ndarray
     (:func:`~samba_server.recon.reconstruct.merge_passes`, as samba-reconstruct does): the
     temporal model sees the future too. Returns ((F, 13, 3) joints, (F,) residual m)."""
     F = len(t)
-    fwd = _solve_pass(rec, markers, t, range(F))
+    fwd = solve_frames(rec, markers, t, range(F))
     results = fwd
     joints = np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3)
     if rec.subject is not None and F > 1:
-        bwd = _solve_pass(rec.again(rec.subject), markers, -np.asarray(t, float), range(F - 1, -1, -1))
+        bwd = solve_frames(rec.again(rec.subject), markers, -np.asarray(t, float), range(F - 1, -1, -1))
         joints, results = merge_passes(fwd, bwd, rec.lengths)
     return joints, np.array([r.residual for r in results], float)
 

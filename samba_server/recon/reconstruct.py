@@ -389,10 +389,17 @@ class Reconstructor:
         return PoseResult(q, float(resid), int(n_seen), int(iters), "solved" if status == 0 else "bridged", (R, o, d))
 
 
-def _run(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, order: np.ndarray, progress) -> list[PoseResult]:
+def solve_frames(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, order, progress=None) -> list[PoseResult]:
+    """``rec.solve`` over the frames in ``order`` (indices into markers (F, 8, 3) and t (F,) s;
+    backwards in time with t negated): a PoseResult per frame, by frame index. A solver error
+    is logged and leaves the frame unsolved. progress: optional callable(1) per frame."""
     out: list[PoseResult] = [None] * len(t)  # type: ignore[list-item]
     for i in order:
-        out[i] = rec.solve(markers[i], float(t[i]))
+        try:
+            out[i] = rec.solve(markers[i], float(t[i]))
+        except Exception:
+            log.exception("solver failed on frame t=%.3f s (frame left unsolved)", abs(float(t[i])))
+            out[i] = PoseResult(np.full((N_JOINTS, 3), np.nan), float("nan"), 0, 0, "unsolved")
         if progress is not None:
             progress(1)
     return out
@@ -455,13 +462,14 @@ def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = N
     lengths = np.asarray(lengths, float)
     F = len(t)
     t0 = time.perf_counter()
-    fwd = _run(Reconstructor(db, config, lengths, offsets), markers, t, np.arange(F), progress)
+    fwd = solve_frames(Reconstructor(db, config, lengths, offsets), markers, t, range(F), progress)
     n_solves = F
     results = fwd
     joints = np.array([r.joints for r in fwd]).reshape(F, N_JOINTS, 3)
     if both_ways and F > 1:
         # time runs backwards: feed -t so the solver sees increasing times
-        bwd = _run(Reconstructor(db, config, lengths, offsets), markers, -np.asarray(t, float), np.arange(F)[::-1], progress)
+        bwd = solve_frames(Reconstructor(db, config, lengths, offsets), markers, -np.asarray(t, float),
+                           range(F - 1, -1, -1), progress)
         n_solves += F
         joints, results = merge_passes(fwd, bwd, lengths)
     elapsed = time.perf_counter() - t0
