@@ -530,6 +530,9 @@ class Labeller:
             return
         body = self._body
         right = right_of(self._facing)
+        if (assign[[LK, LA, RK, RA]] < 0).all() and (assign[[LS, RS]] >= 0).any():
+            self._recover_legs(pts, assign, arow, row_pt, right)
+            return
         for (_s, _w, k, a), (_os, _ow, ok, oa) in ((SIDES[0], SIDES[1]), (SIDES[1], SIDES[0])):
             if assign[k] >= 0 or assign[a] >= 0 or (assign[ok] < 0 and assign[oa] < 0):
                 continue
@@ -557,6 +560,42 @@ class Labeller:
                 for m, p in zip((k, a), fits[0]):
                     assign[m] = p
                     arow[m] = int(np.flatnonzero(row_pt == p)[0])
+
+    def _recover_legs(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray,
+                      right: np.ndarray) -> None:
+        """Both legs unnamed, the upper body named (after a blackout the identification can
+        leave the legs of a subject climbing down out: named by no prediction, no anchor): the
+        legs are found again as the only two disjoint pairs of free points that each fit a leg
+        (a shin apart, knee above ankle, within the rigid distances of the named markers), the
+        left leg the one whose knee is to the subject's left, by at least ``crossed_m`` (knees
+        side by side or crossed leave it unclear: nothing is named). assign, arow (8,) in place; right (3,) the subject's right."""
+        body = self._body
+        free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
+        named = np.full((N_MARKERS, 3), np.nan)
+        named[assign >= 0] = pts.X[assign[assign >= 0]]
+        X = pts.X[free]
+        shin_ok = (np.abs(np.linalg.norm(X[:, None] - X[None], axis=2) - body.shin) <= body.tol) & \
+            (X[:, None, 2] > X[None, :, 2])
+        pairs = [(int(free[i]), int(free[j])) for i, j in zip(*np.nonzero(shin_ok))]
+        fits = []
+        for x in range(len(pairs)):
+            for y in range(x + 1, len(pairs)):
+                (k1, a1), (k2, a2) = pairs[x], pairs[y]
+                if len({k1, a1, k2, a2}) < 4:
+                    continue
+                (lk, la), (rk, ra) = ((k1, a1), (k2, a2)) if float(pts.X[k1] @ right) < float(pts.X[k2] @ right) \
+                    else ((k2, a2), (k1, a1))
+                if float((pts.X[rk] - pts.X[lk]) @ right) < self.config.crossed_m:
+                    continue  # knees side by side or crossed: which leg is which is not clear
+                trial = named.copy()
+                trial[[LK, LA, RK, RA]] = pts.X[[lk, la, rk, ra]]
+                if not body.violations(trial):
+                    fits.append((lk, la, rk, ra))
+        if len(fits) == 1:
+            log.debug("t=%.3f s: both legs found again as the one pair of shins that fits them", self._t_frame)
+            for m, p in zip((LK, LA, RK, RA), fits[0]):
+                assign[m] = p
+                arow[m] = int(np.flatnonzero(row_pt == p)[0])
 
     def _swap_for_shins(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray | None) -> None:
         """Both shins (knee-ankle distances) broken while all four leg markers are named on

@@ -838,6 +838,34 @@ def test_a_wrist_whose_skeleton_went_wrong_is_found_again_as_the_one_marker_unna
         assert not np.isfinite(named[61:, RW]).any()
 
 
+@pytest.mark.parametrize("rule", [True, False])
+def test_both_legs_the_skeleton_lifts_are_found_again_as_the_one_pair_of_shins(rule, monkeypatch):
+    """After a blackout the upper body is named, the legs not, and the solver lifts both legs
+    0.5 m (a subject climbing down from a structure): no prediction, no named knee or ankle
+    anchors either leg. The only two disjoint pairs of free points a shin apart, knee above
+    ankle, the left knee to the subject's left, are the legs: named at once; without the rule
+    not one of them is named right."""
+    from samba_common.skeleton import J
+    from samba_server.labelling.rigid import LA, LK, RA, RK
+
+    if not rule:
+        monkeypatch.setattr(Labeller, "_recover_legs", lambda self, *a: None)
+    rig = _three_cameras()
+    joints, _t = synthetic_motion(2.0, FPS)
+    truth = joints[:, list(MARKER_JOINT)]
+    lab = Labeller(rig, config=LabelConfig(audit_interval=np.inf))
+    lab.set_lengths(DEFAULT_LENGTHS)
+    lift = np.array([0.0, 0.3, 0.4])
+    legs = {J[n]: lift for n in ("left_knee", "left_ankle", "right_knee", "right_ankle")}
+    named = _with_wrong_skeleton(lab, rig, joints, [LK, LA, RK, RA], [], legs, np.random.default_rng(14))
+    right = _right(named, truth)
+    assert right[:60].all()
+    if rule:
+        assert right[61:].all()
+    else:  # left unnamed, or worse: ankles named on the knees' points, the knees unnamed
+        assert not right[61:, [LK, LA, RK, RA]].any()
+
+
 #: a CMU pose (the playground clip 006_11, mirrored) on the default body, upright and facing +Y:
 #: the left hand raised beside its shoulder, 20 cm from it
 _HAND_BY_SHOULDER = np.array([
