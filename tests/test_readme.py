@@ -598,8 +598,11 @@ def check_exports(d: Path) -> None:
         # exact where the bones keep their length; a fixed-length skeleton is cm off where they vary
         assert np.median(err) < 0.001 and err.max() < 0.05, f"BVH {b}: median {np.median(err):.4f} m, max {err.max():.4f} m"
 
-    # C3D by ezc3d and by the pure-Python c3d package: mm, Z up, first 13 points = joints
-    for name in ("take.c3d", "take_mcap.c3d"):
+    # C3D by ezc3d and by the pure-Python c3d package: mm, Z up, first 13 points = joints (the
+    # recording's export holds its live poses, as samba-inspect --export read them back)
+    live = load_npz(d / "inspect.npz")["joints"]
+    for name, joints in (("take.c3d", jz["joints"]), ("take_mcap.c3d", live)):
+        ok = solved(joints)
         ezc3d = pytest.importorskip("ezc3d")
         c = ezc3d.c3d(str(d / name))
         labels = c["parameters"]["POINT"]["LABELS"]["value"]
@@ -617,6 +620,8 @@ def check_exports(d: Path) -> None:
         assert len(frames) == n
         got = np.stack(frames) / 1000.0
         np.testing.assert_allclose(got[ok], joints[ok], atol=1e-4)
+
+    joints, ok = jz["joints"], solved(jz["joints"])
 
     # TRC: OpenSim axes, opensim = 1000 (y, z, x) mm
     head, mnames, tt, data = read_trc(d / "take.trc")
