@@ -44,12 +44,11 @@ from samba_common.skeleton import MARKER_JOINT  # noqa: E402
 from samba_mote.sim.render import SimConfig  # noqa: E402
 from samba_mote.sim.take import load_motion, make_take, prepare_motion  # noqa: E402
 from samba_server.app import load_server_configs  # noqa: E402
-from samba_server.both_ways import solve_both_ways  # noqa: E402
 from samba_server.labelling.score import score_take, separable_visible  # noqa: E402
 from samba_server.process import process_videos  # noqa: E402
 from samba_server.recon.db import MotionDB, build_db  # noqa: E402
 from samba_server.recon.evaluate import vary_body  # noqa: E402
-from samba_server.recon.reconstruct import Reconstructor  # noqa: E402
+from samba_server.recon.reconstruct import Reconstructor, solve_both_ways, solve_frames  # noqa: E402
 from samba_server.server import Server, ServerConfig  # noqa: E402
 
 #: clips the labelling was developed on: walks that cross the volume and turn, a take with jumps
@@ -86,7 +85,7 @@ def true_marker_reference(truth: np.ndarray, t: np.ndarray, blackout: np.ndarray
     if both_ways:
         est = solve_both_ways(rec, markers, t)[0]
     else:
-        est = np.array([rec.solve(m, float(tt)).joints for m, tt in zip(markers, t)])
+        est = np.array([r.joints for r in solve_frames(rec, markers, t, range(len(t)))])
     ok = np.isfinite(est).all(axis=(1, 2))
     err = np.linalg.norm(est - truth, axis=-1)
     far = float((np.nanmax(np.where(ok[:, None], err, 0.0), axis=1) > 0.2)[ok].mean()) if ok.any() else float("nan")

@@ -30,7 +30,8 @@ mid-motion at the end of the take, with no standard pose, and its first identifi
 the weaker one (tried: preferring the pass that had tracked longer lost 17 points on a take
 whose backward identification named the legs the wrong way round). The chosen markers are
 then solved forwards by a new solver built as the live one and backwards by one for the
-subject it measured, the two merged per frame (:func:`solve_both_ways`).
+subject it measured, the two merged per frame
+(:func:`~samba_server.recon.reconstruct.solve_both_ways`).
 
 The recording (``--record``) keeps the live, forward-only poses: ``samba-replay`` of it
 equals it.
@@ -43,10 +44,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from samba_common.skeleton import N_JOINTS, N_MARKERS
+from samba_common.skeleton import N_MARKERS
 
 from .labelling import bit_markers, marker_bits
-from .recon.reconstruct import merge_passes, solve_frames
+from .recon.reconstruct import solve_both_ways
 from .server import Server, ServerConfig
 
 log = logging.getLogger(__name__)
@@ -161,22 +162,6 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     return markers, from_b
 
 
-def solve_both_ways(rec, markers: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Solve the chosen markers (F, 8, 3) at t (F,) s forwards with ``rec`` (a fresh solver built
-    as the live one: it measures the subject from the standard pose), then backwards with a
-    solver for the subject it measured, and merge the two per frame
-    (:func:`~samba_server.recon.reconstruct.merge_passes`, as samba-reconstruct does): the
-    temporal model sees the future too. Returns ((F, 13, 3) joints, (F,) residual m)."""
-    F = len(t)
-    fwd = solve_frames(rec, markers, t, range(F))
-    results = fwd
-    joints = np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3)
-    if rec.subject is not None and F > 1:
-        bwd = solve_frames(rec.again(rec.subject), markers, -np.asarray(t, float), range(F - 1, -1, -1))
-        joints, results = merge_passes(fwd, bwd, rec.lengths)
-    return joints, np.array([r.residual for r in results], float)
-
-
 def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: PassResult,
                       progress=None) -> tuple[np.ndarray, dict] | None:
     """The two-way labelling of a take the forward (live) pass ``server`` has processed.
@@ -190,8 +175,8 @@ def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: P
         return None
     markers, take_b = choose(fwd, bwd, t)
     log.info("two-way labelling: %d of %d frames named from the backward pass", int(take_b.sum()), len(t))
-    joints, residual = solve_both_ways(server.reconstructor.again(), markers, t)
-    extra = {"markers": markers, "residual": residual,
+    joints, results = solve_both_ways(server.reconstructor.again(), markers, t)
+    extra = {"markers": markers, "residual": np.array([r.residual for r in results], float),
              "n_markers": np.isfinite(markers).all(axis=2).sum(axis=1),
              "label_margin": np.where(take_b, bwd.margin, fwd.margin), "from_backward": take_b}
     return joints, extra

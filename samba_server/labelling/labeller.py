@@ -512,8 +512,7 @@ class Labeller:
             if any(m in g for g in body.violations(trial)):
                 continue
             named[m] = pts.X[p]
-            assign[m] = p
-            arow[m] = int(np.flatnonzero(row_pt == p)[0])
+            _name_points(assign, arow, row_pt, (m,), (p,))
 
     def _recover_leg(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray) -> None:
         """A leg with neither knee nor ankle named while the other leg has a name is found again
@@ -536,17 +535,10 @@ class Labeller:
         for (_s, _w, k, a), (_os, _ow, ok, oa) in ((SIDES[0], SIDES[1]), (SIDES[1], SIDES[0])):
             if assign[k] >= 0 or assign[a] >= 0 or (assign[ok] < 0 and assign[oa] < 0):
                 continue
-            free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
-            named = np.full((N_MARKERS, 3), np.nan)
-            named[assign >= 0] = pts.X[assign[assign >= 0]]
+            named, pairs = self._free_shins(pts, assign)
             outward = right if k == RK else -right
-            X = pts.X[free]
-            # (knee, ankle) candidates a shin apart, knee above: few, so clutter costs little
-            shin_ok = (np.abs(np.linalg.norm(X[:, None] - X[None], axis=2) - body.shin) <= body.tol) & \
-                (X[:, None, 2] > X[None, :, 2])
-            ki, ai = np.nonzero(shin_ok)
             fits = []
-            for i, j in zip(free[ki], free[ai]):
+            for i, j in pairs:
                 knee, ankle = pts.X[i], pts.X[j]
                 if any(assign[o] >= 0 and float((p - named[o]) @ outward) < -self.config.crossed_m
                        for o, p in ((ok, knee), (oa, ankle))):
@@ -557,9 +549,7 @@ class Labeller:
                     fits.append((i, j))
             if len(fits) == 1:
                 log.debug("t=%.3f s: leg %d-%d found again as the one pair of points that fits it", self._t_frame, k, a)
-                for m, p in zip((k, a), fits[0]):
-                    assign[m] = p
-                    arow[m] = int(np.flatnonzero(row_pt == p)[0])
+                _name_points(assign, arow, row_pt, (k, a), fits[0])
 
     def _recover_legs(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray,
                       right: np.ndarray) -> None:
@@ -570,13 +560,7 @@ class Labeller:
         left leg the one whose knee is to the subject's left, by at least ``crossed_m`` (knees
         side by side or crossed leave it unclear: nothing is named). assign, arow (8,) in place; right (3,) the subject's right."""
         body = self._body
-        free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
-        named = np.full((N_MARKERS, 3), np.nan)
-        named[assign >= 0] = pts.X[assign[assign >= 0]]
-        X = pts.X[free]
-        shin_ok = (np.abs(np.linalg.norm(X[:, None] - X[None], axis=2) - body.shin) <= body.tol) & \
-            (X[:, None, 2] > X[None, :, 2])
-        pairs = [(int(free[i]), int(free[j])) for i, j in zip(*np.nonzero(shin_ok))]
+        named, pairs = self._free_shins(pts, assign)
         fits = []
         for x in range(len(pairs)):
             for y in range(x + 1, len(pairs)):
@@ -593,9 +577,19 @@ class Labeller:
                     fits.append((lk, la, rk, ra))
         if len(fits) == 1:
             log.debug("t=%.3f s: both legs found again as the one pair of shins that fits them", self._t_frame)
-            for m, p in zip((LK, LA, RK, RA), fits[0]):
-                assign[m] = p
-                arow[m] = int(np.flatnonzero(row_pt == p)[0])
+            _name_points(assign, arow, row_pt, (LK, LA, RK, RA), fits[0])
+
+    def _free_shins(self, pts: Points3D, assign: np.ndarray) -> tuple[np.ndarray, list[tuple[int, int]]]:
+        """The named markers (8, 3) (NaN = unnamed) and the (knee, ankle) candidates among the
+        points nobody took (assign (8,): point per marker, -1 = none): pairs of point indices a
+        shin apart (within the tolerance), the knee above. Few, so clutter costs little."""
+        free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
+        named = np.full((N_MARKERS, 3), np.nan)
+        named[assign >= 0] = pts.X[assign[assign >= 0]]
+        X = pts.X[free]
+        shin_ok = (np.abs(np.linalg.norm(X[:, None] - X[None], axis=2) - self._body.shin) <= self._body.tol) & \
+            (X[:, None, 2] > X[None, :, 2])
+        return named, [(int(free[i]), int(free[j])) for i, j in zip(*np.nonzero(shin_ok))]
 
     def _swap_for_shins(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray | None) -> None:
         """Both shins (knee-ankle distances) broken while all four leg markers are named on
@@ -1011,6 +1005,14 @@ def _held_since(since: float | None, holds: bool, t: float) -> float | None:
     if not holds:
         return None
     return t if since is None else since
+
+
+def _name_points(assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray, markers, points) -> None:
+    """Name each marker of ``markers`` on the point of ``points`` beside it: assign, arow (8,)
+    in place (arow: the point's assignment row in row_pt)."""
+    for m, p in zip(markers, points):
+        assign[m] = p
+        arow[m] = int(np.flatnonzero(row_pt == p)[0])
 
 
 def _guess_split(pred: np.ndarray, m: int, n: int, half: float, right: np.ndarray | None) -> np.ndarray | None:

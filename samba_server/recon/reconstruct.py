@@ -440,6 +440,22 @@ def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarr
     return joints, results
 
 
+def solve_both_ways(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, progress=None
+                    ) -> tuple[np.ndarray, list[PoseResult]]:
+    """Solve markers (F, 8, 3) at t (F,) s forwards with ``rec`` (fresh: exactly as live), then
+    backwards in time with a solver for the subject it has (measured from the standard pose,
+    or given), and merge the two per frame (:func:`merge_passes`): the temporal model sees the
+    future too. Forwards only when rec has no subject or F < 2. Returns ((F, 13, 3) joints, the
+    PoseResult kept per frame). progress: optional callable(1) per solve."""
+    F = len(t)
+    fwd = solve_frames(rec, markers, t, range(F), progress)
+    if rec.subject is None or F < 2:
+        return np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3), fwd
+    # time runs backwards: feed -t so the solver sees increasing times
+    bwd = solve_frames(rec.again(rec.subject), markers, -np.asarray(t, float), range(F - 1, -1, -1), progress)
+    return merge_passes(fwd, bwd, rec.lengths)
+
+
 def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = None,
                      config: ReconstructConfig | None = None, lengths: np.ndarray | None = None,
                      progress=None, both_ways: bool = True,
@@ -462,16 +478,13 @@ def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = N
     lengths = np.asarray(lengths, float)
     F = len(t)
     t0 = time.perf_counter()
-    fwd = solve_frames(Reconstructor(db, config, lengths, offsets), markers, t, range(F), progress)
-    n_solves = F
-    results = fwd
-    joints = np.array([r.joints for r in fwd]).reshape(F, N_JOINTS, 3)
-    if both_ways and F > 1:
-        # time runs backwards: feed -t so the solver sees increasing times
-        bwd = solve_frames(Reconstructor(db, config, lengths, offsets), markers, -np.asarray(t, float),
-                           range(F - 1, -1, -1), progress)
-        n_solves += F
-        joints, results = merge_passes(fwd, bwd, lengths)
+    rec = Reconstructor(db, config, lengths, offsets)
+    if both_ways:
+        joints, results = solve_both_ways(rec, markers, t, progress)
+    else:
+        results = solve_frames(rec, markers, t, range(F), progress)
+        joints = np.array([r.joints for r in results], float).reshape(F, N_JOINTS, 3)
+    n_solves = 2 * F if both_ways and F > 1 else F
     elapsed = time.perf_counter() - t0
     info = {"residual": np.array([r.residual for r in results]),
             "n_markers": np.array([r.n_markers for r in results], np.int16),
