@@ -134,14 +134,15 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     # there (not renaming them itself), names at the same points; when it is confirmed for all
     # of them and the two namings agree as a whole (>= 4 markers named by both, none named
     # otherwise), for every marker
-    agree = marker_bits(nf & nb & close) & ~bwd.renamed.astype(np.int64)
+    alike = marker_bits(nf & nb & close)  # (F,) bits: named at the same points by both
+    agree = alike & ~bwd.renamed.astype(np.int64)
     renamed = fwd.renamed.astype(np.int64)
     whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
     confirmed = np.where(whole & (renamed != 0), marker_bits(np.ones(N_MARKERS, bool)), renamed & agree)
     doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True)
     # and the other way round: a backward rename counts where the forward pass names those
     # markers at the same points (tracking them, not renaming them)
-    agree_b = marker_bits(nf & nb & close) & ~renamed
+    agree_b = alike & ~renamed
     doubt_b = _doubted(bwd.renamed.astype(np.int64) & agree_b, nb.any(axis=1), t, window_s, forward=False)
     markers = fwd.markers.copy()
     from_b = np.zeros(len(t), bool)
