@@ -84,8 +84,8 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
     for k in range(F - 1, -1, -1):
         tb = t_end - float(t[k])  # backwards time runs forwards
         markers, _mask, q = twin.label_packets(packets[k], tb)
+        markers = twin.solve_markers(markers, tb)[0]
         out.markers[k], out.margin[k], out.renamed[k] = markers, q.margin_m, q.renamed
-        twin.solve_markers(markers, tb)
         if progress is not None:
             progress.update(1)
     return out

@@ -286,20 +286,31 @@ class Server:
         mask = marker_bits(np.isfinite(pts).all(axis=1))
         return pts, mask, quality
 
-    def solve_markers(self, markers: np.ndarray, t: float) -> tuple[np.ndarray, float]:
-        """Solve the named markers (8, 3) of the frame at t s: ((13, 3) joints, NaN if unsolved;
-        residual m). A solved pose feeds the labelling's predictions; a solver error is logged
-        and leaves the frame unsolved."""
+    def solve_markers(self, markers: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """Solve the named markers (8, 3) of the frame at t s: ((8, 3) markers, (13, 3) joints,
+        NaN if unsolved; residual m). Names the solver cannot fit go back to the labelling
+        (:meth:`Labeller.refit`), which may swap them: the frame is then solved again with the
+        new names, which are returned. A solved pose feeds the labelling's predictions; a
+        solver error is logged and leaves the frame unsolved."""
         joints, residual = np.full((N_JOINTS, 3), np.nan), float("nan")
+        rec = self.reconstructor
         try:
-            r = self.reconstructor.solve(markers, t)
+            before = rec.checkpoint() if hasattr(rec, "checkpoint") else None
+            r = rec.solve(markers, t)
+            if before is not None and r.residual > self.labeller.config.refit_residual_m:
+                renamed = self.labeller.refit(markers, rec.markers_of(r.joints), r.residual, t,
+                                              lambda m: rec.trial(m, t, before))
+                if renamed is not None:
+                    markers = renamed
+                    rec.restore(before)
+                    r = rec.solve(markers, t)
             joints = np.asarray(r.joints, float)
             residual = float(r.residual)
         except Exception:
             log.exception("solver failed on frame t=%.3f s (frame left unsolved)", t)
         if np.isfinite(joints).all():
             self.labeller.observe(t, self._marker_view(joints))
-        return joints, residual
+        return markers, joints, residual
 
     def _frame(self, frame) -> PoseMessage:
         self.stats.frames += 1
@@ -318,7 +329,7 @@ class Server:
             self.stats.solve_skipped += 1
             flags |= FLAG_SOLVE_SKIPPED
         if self.reconstructor is not None and not skip:
-            joints, residual = self.solve_markers(markers, t)
+            markers, joints, residual = self.solve_markers(markers, t)  # a refit swaps names, keeps the mask
             self._check_subject(frame.t_ns)
             if np.isfinite(joints).all():
                 flags |= FLAG_SOLVED

@@ -78,6 +78,9 @@ class LabelConfig:
     fit_swap_ratio: float = 0.6  #: names swapped when that brings the 8 markers this much nearer (ratio) a database pose ...
     fit_swap_s: float = 0.05  #: ... the same swap at every check for this long (inf: never) ...
     fit_interval: float = 0.05  #: ... checked this often (s; 0: every frame)
+    refit_residual_m: float = 0.04  #: names the solver fits no better than this (rms m) are doubted ...
+    refit_ratio: float = 0.25  #: ... and swapped when the swap lets it fit them this much better (ratio) ...
+    refit_s: float = 0.05  #: ... the same swap for this long (inf: never)
     track_timeout: float = 0.12  #: a marker unseen for longer is predicted from the skeleton
     skeleton_max_age: float = 0.4  #: the skeleton predicts markers up to this long after the last solved pose
     min_tracked: int = 3  #: fewer predictable markers: identify from the points
@@ -128,7 +131,8 @@ class LabelStats:
     re-acquisitions), overridden mote labels, each re-acquisition's delay (s) from the
     first frame with points after the labels were lost to the frame they came back, audits of
     the tracked names by a fresh identification and how many of them replaced the names, frames
-    whose names replaced wrong ones (:attr:`LabelQuality.renamed`)."""
+    whose names replaced wrong ones (:attr:`LabelQuality.renamed`), names swapped because the
+    solver could fit them only so (:meth:`Labeller.refit`)."""
 
     frames: int = 0
     frames_with_points: int = 0
@@ -139,6 +143,7 @@ class LabelStats:
     audits: int = 0
     audit_switches: int = 0
     renames: int = 0
+    refits: int = 0
 
 
 class Labeller:
@@ -178,6 +183,7 @@ class Labeller:
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
         self._fit_swap: tuple[int, float] | None = None  # (row of _FIT_SWAPS, since when) that makes the names fit a body better
         self._t_fit = -np.inf  # last database-fit check
+        self._refit: tuple[int, float] | None = None  # (row of _FIT_SWAPS, since when) the solver fits far better
         #: (H, 8, 3) marker sets [, within] -> (H,) distance to the nearest body the motion
         #: database knows, inf beyond within (:meth:`Reconstructor.body_distance`; the server
         #: sets it), or None
@@ -192,6 +198,48 @@ class Labeller:
         """Remember a solved pose: t seconds, joints (13, 3) metres (NaN frames are ignored)."""
         if np.all(np.isfinite(joints)):
             self._skel = (self._skel + [(t, joints[list(MARKER_JOINT)].copy())])[-2:]
+
+    def refit(self, markers: np.ndarray, model: np.ndarray, residual: float, t: float,
+              trial: Callable[[np.ndarray], float]) -> np.ndarray | None:
+        """The solver's verdict on the names just given: markers (8, 3) as :meth:`label` named
+        them at t s (NaN = unnamed), model (8, 3) the solved pose's markers, residual its rms
+        marker error (m). Names no body fits (residual > ``refit_residual_m``; a dancer's kick
+        lifts the ankle above the knee, the knee's point was hidden for a frame and the two names
+        came back the other way round: 11-17 cm rms for 0.7 s, and no database body is near the
+        kick to tell) are tried swapped as :meth:`_swap_to_fit` would (each confusion tracking
+        can make that moves a marker the pose misses by more than that), solved by ``trial``
+        ((8, 3) markers -> rms residual m, from the solver's state before this frame). A swap
+        the solver fits ``refit_ratio`` as badly, the same one for ``refit_s``, is made: names
+        and tracks. Returns the renamed markers (8, 3), or None (names kept)."""
+        cfg = self.config
+        named = np.isfinite(markers).all(axis=1)
+        if not residual > cfg.refit_residual_m or not math.isfinite(cfg.refit_s):
+            self._refit = None
+            return None
+        off = named & (np.linalg.norm(model - markers, axis=1) > cfg.refit_residual_m)
+        rows = np.flatnonzero(~(_FIT_MOVES & ~named).any(axis=1) & (_FIT_MOVES & off).any(axis=1))
+        fits = np.array([trial(markers[_FIT_SWAPS[r]]) for r in rows])
+        ok = np.isfinite(fits) & (fits < cfg.refit_ratio * residual)
+        if not ok.any():
+            self._refit = None
+            return None
+        best = int(rows[np.argmin(np.where(ok, fits, np.inf))])
+        if self._refit is None or self._refit[0] != best:
+            self._refit = (best, t)
+        if t - self._refit[1] < cfg.refit_s - 1e-6:
+            return None
+        perm = _FIT_SWAPS[best]
+        pairs = [(m, int(perm[m])) for m in range(N_MARKERS) if perm[m] > m]
+        log.debug("t=%.3f s: names %s swapped: the solver fits them %.3f m rms, %.3f as they were", t, pairs,
+                  float(np.nanmin(fits)), residual)
+        self._refit = None
+        out = markers.copy()
+        self._renamed = 0
+        self._swap(pairs, out)
+        self.stats.renames += int(self.last_quality.renamed == 0)
+        self.last_quality.renamed |= self._renamed
+        self.stats.refits += 1
+        return out
 
     def set_lengths(self, lengths: np.ndarray | None) -> None:
         """The subject's bone lengths (8,) (BONE_TYPES order) once measured; None keeps the default body."""
@@ -218,6 +266,7 @@ class Labeller:
         self._knees_crossed_since = None
         self._arm_swap_since = [None, None]
         self._fit_swap = None
+        self._refit = None
         self._glue = ([], [])
 
     # ------------------------------------------------------------------ per frame
@@ -696,12 +745,13 @@ class Labeller:
             self._knees_crossed_since = None
             self._swap([(LK, RK), (LA, RA)], out, assign, arow)
 
-    def _swap(self, pairs: list[tuple[int, int]], out: np.ndarray, assign: np.ndarray, arow: np.ndarray) -> None:
-        """Swap the names of each (m, n) marker pair: out (8, 3), assign, arow (8,) in place, and
-        the tracks (position, velocity, last seen) with them, so their velocities carry on."""
+    def _swap(self, pairs: list[tuple[int, int]], *frame: np.ndarray) -> None:
+        """Swap the names of each (m, n) marker pair: in the frame's arrays (out (8, 3), assign,
+        arow (8,)) in place, and the tracks (position, velocity, last seen) with them, so their
+        velocities carry on."""
         for m, n in pairs:
             self._renamed |= (1 << m) | (1 << n)
-            for a in (out, assign, arow, self._pos, self._vel, self._seen):
+            for a in (*frame, self._pos, self._vel, self._seen):
                 a[[m, n]] = a[[n, m]]
 
     def _unglue(self, out: np.ndarray, assign: np.ndarray, t: float) -> None:

@@ -364,29 +364,59 @@ class Reconstructor:
         return PoseResult(np.full((N_JOINTS, 3), np.nan), float("nan"), n, 0, "unsolved")
 
     def _solve(self, markers: np.ndarray, t: float) -> PoseResult:
-        cfg, h = self.config, self._hist
-        assert self.lengths is not None and self.index is not None
-        has_pred = h.n > 0 and t - h.t_seen <= cfg.max_gap
-        if not has_pred and h.n:
+        cfg = self.config
+        has_pred = self._hist.n > 0 and t - self._hist.t_seen <= cfg.max_gap
+        if not has_pred and self._hist.n:
             self.reset()
-            h = self._hist
-        trees = self._trees
-        feat_cols, n_cols = self._cols[cfg.parts]
-        dims, n_dims = self._dims[cfg.parts]
-        status, q, R, o, d, iters, resid, n_seen, mk = kernels.frame(
-            markers, has_pred, h.n, h.q1, h.q2, h.m1, h.m2, h.has_state, h.R, h.o, h.dirs, t - h.t_last if h.n else 0.0,
-            trees, self.index.features, feat_cols, n_cols, UP_WEIGHT, self.index.R_A, self.db.dirs, self.db.up,
-            min(cfg.k, len(self.db)),
-            dims, n_dims, self._cos, self._sin, self.lengths, self.offsets, self._floor2, cfg.prior_weight, cfg.sigma_marker,
-            cfg.accel, cfg.smooth_floor, cfg.min_markers, kernels.G, cfg.max_iter, cfg.tol)
+        status, q, R, o, d, iters, resid, n_seen, mk = self._frame(markers, t, self._hist)
         if status == 2:
             return PoseResult(q, float("nan"), int(n_seen), 0, "unsolved")
+        h = self._hist
         h.q2, h.q1, h.n = h.q1, q, min(h.n + 1, 2)
         h.m2, h.m1 = h.m1, mk
         h.R, h.o, h.dirs, h.has_state, h.t_last = R, o, d, True, t
         if status == 0:
             h.t_seen = t
         return PoseResult(q, float(resid), int(n_seen), int(iters), "solved" if status == 0 else "bridged", (R, o, d))
+
+    def _frame(self, markers: np.ndarray, t: float, h: _History) -> tuple:
+        """The compiled per-frame solve (:func:`kernels.frame`) of markers (8, 3) at t s from the
+        temporal state h, which it does not change; its outputs."""
+        cfg = self.config
+        assert self.lengths is not None and self.index is not None
+        has_pred = h.n > 0 and t - h.t_seen <= cfg.max_gap
+        trees = self._trees
+        feat_cols, n_cols = self._cols[cfg.parts]
+        dims, n_dims = self._dims[cfg.parts]
+        return kernels.frame(
+            markers, has_pred, h.n, h.q1, h.q2, h.m1, h.m2, h.has_state, h.R, h.o, h.dirs, t - h.t_last if h.n else 0.0,
+            trees, self.index.features, feat_cols, n_cols, UP_WEIGHT, self.index.R_A, self.db.dirs, self.db.up,
+            min(cfg.k, len(self.db)),
+            dims, n_dims, self._cos, self._sin, self.lengths, self.offsets, self._floor2, cfg.prior_weight, cfg.sigma_marker,
+            cfg.accel, cfg.smooth_floor, cfg.min_markers, kernels.G, cfg.max_iter, cfg.tol)
+
+    # --- trial solves (the labelling asks which names the solver can fit) ------------------
+    def checkpoint(self) -> _History | None:
+        """The temporal state, to try other names for the next frame from (:meth:`trial`) and
+        to go back to (:meth:`restore`); None while the subject is still being measured (the
+        frame's markers also feed that measurement, which a second solve would repeat)."""
+        if self.lengths is None or self._estimating or self._calibration is not None:
+            return None
+        h = self._hist
+        return _History(h.n, h.q1.copy(), h.q2.copy(), h.m1.copy(), h.m2.copy(), h.has_state, h.R.copy(),
+                        h.o.copy(), h.dirs.copy(), h.t_last, h.t_seen)
+
+    def restore(self, state: _History) -> None:
+        """Go back to a :meth:`checkpoint` (to solve the frame again with other names)."""
+        self._hist = state
+
+    def trial(self, markers: np.ndarray, t: float, state: _History) -> float:
+        """rms marker residual (m) of solving markers (8, 3) at t s from ``state`` (a
+        :meth:`checkpoint`), changing nothing; NaN when it would not solve or only bridge."""
+        has_pred = state.n > 0 and t - state.t_seen <= self.config.max_gap
+        status, *_rest, resid, _n, _mk = self._frame(np.asarray(markers, float), float(t),
+                                                   state if has_pred or not state.n else _History())
+        return float(resid) if status == 0 else float("nan")
 
 
 def solve_frames(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, order, progress=None) -> list[PoseResult]:

@@ -45,9 +45,9 @@ def _take(seconds: float = 4.0, blackout: tuple[int, int] = (110, 140)):
     F = len(t)
     fwd = PassResult(np.full((F, 8, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan))
     for k in range(F):
-        fwd.markers[k], _mask, q = server.label_packets(packets[k], float(t[k]))
+        markers, _mask, q = server.label_packets(packets[k], float(t[k]))
+        fwd.markers[k] = server.solve_markers(markers, float(t[k]))[0]
         fwd.renamed[k], fwd.margin[k] = q.renamed, q.margin_m
-        server.solve_markers(fwd.markers[k], float(t[k]))
     return truth, packets, t, server, fwd
 
 
