@@ -78,6 +78,7 @@ class LabelConfig:
     fit_swap_ratio: float = 0.6  #: names swapped when that brings the 8 markers this much nearer (ratio) a database pose ...
     fit_swap_s: float = 0.05  #: ... the same swap at every check for this long (inf: never) ...
     fit_interval: float = 0.05  #: ... checked this often (s; 0: every frame)
+    fit_mirror_s: float = 1.5  #: ... the mirror image (all names left for right) only this long after an identification (inf: always)
     refit_residual_m: float = 0.04  #: names the solver fits no better than this (rms m) are doubted ...
     refit_ratio: float = 0.25  #: ... and swapped when the swap lets it fit them this much better (ratio) ...
     refit_s: float = 0.05  #: ... the same swap for this long (inf: never)
@@ -183,6 +184,7 @@ class Labeller:
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
         self._fit_swap: tuple[int, float] | None = None  # (row of _FIT_SWAPS, since when) that makes the names fit a body better
         self._t_fit = -np.inf  # last database-fit check
+        self._t_identified = -np.inf  # when the names were last identified afresh
         self._refit: tuple[int, float] | None = None  # (row of _FIT_SWAPS, since when) the solver fits far better
         #: (H, 8, 3) marker sets [, within] -> (H,) distance to the nearest body the motion
         #: database knows, inf beyond within (:meth:`Reconstructor.body_distance`; the server
@@ -217,7 +219,7 @@ class Labeller:
             self._refit = None
             return None
         off = named & (np.linalg.norm(model - markers, axis=1) > cfg.refit_residual_m)
-        rows = np.flatnonzero(~(_FIT_MOVES & ~named).any(axis=1) & (_FIT_MOVES & off).any(axis=1))
+        rows = np.flatnonzero(self._swappable(named, t) & (_FIT_MOVES & off).any(axis=1))
         fits = np.array([trial(markers[_FIT_SWAPS[r]]) for r in rows])
         ok = np.isfinite(fits) & (fits < cfg.refit_ratio * residual)
         if not ok.any():
@@ -708,8 +710,7 @@ class Labeller:
         if self.pose_fit is None or not math.isfinite(cfg.fit_swap_s) or not np.isfinite(base).all():
             self._fit_swap = None
             return
-        # only swaps of names given to points (an unnamed marker's prediction is not a name)
-        usable = np.flatnonzero(~(_FIT_MOVES & (assign < 0)).any(axis=1))
+        usable = np.flatnonzero(self._swappable(assign >= 0, t))
         dist0 = float(self.pose_fit(base[None])[0])
         best, holds = -1, False
         if usable.size and math.isfinite(dist0):
@@ -726,6 +727,16 @@ class Labeller:
                       dist[i], dist0)
             self._fit_swap = None
             self._swap(pairs, out, assign, arow)
+
+    def _swappable(self, named: np.ndarray, t: float) -> np.ndarray:
+        """(len(_FIT_SWAPS),) bool: the confusions worth trying on names given to points (named
+        (8,) bool; an unnamed marker's prediction is not a name). The mirror image turns the
+        subject round in one frame: only a fresh identification (``fit_mirror_s``) can have got
+        that wrong, not names tracked since (a straight leg raised 40 degrees in front lies
+        nearer a database body named as the other leg stretched behind, and was so renamed)."""
+        ok = ~(_FIT_MOVES & ~named).any(axis=1)
+        ok[_MIRROR] &= t - self._t_identified <= self.config.fit_mirror_s
+        return ok
 
     def _uncross_knees(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray,
                        t: float) -> None:
@@ -1024,6 +1035,7 @@ class Labeller:
         named = np.isfinite(out).all(axis=1)
         if reset:
             self._reset_timers()
+            self._t_identified = t
             self._pos[:] = np.nan
             self._seen[:] = -np.inf
             self._vel[:] = 0.0
@@ -1116,6 +1128,7 @@ _FIT_SWAPS = _permutations((
     ((LS, LW),), ((RS, RW),), ((LW, RW),), ((LK, RK),), ((LA, RA),), ((LK, RK), (LA, RA)), ((LK, LA),),
     ((RK, RA),), ((LS, RW),), ((RS, LW),), ((LS, RS), (LW, RW), (LK, RK), (LA, RA))))
 _FIT_MOVES = _FIT_SWAPS != np.arange(N_MARKERS)
+_MIRROR = len(_FIT_SWAPS) - 1  #: the row of _FIT_SWAPS naming every marker for its other side
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
 
 

@@ -968,7 +968,8 @@ def test_a_knee_and_its_ankle_named_the_other_way_round_in_a_high_kick_are_swapp
     database body is near such a kick to tell. The solver is: it cannot put a knee a whole leg
     from the hip (rms residual > 4 cm), and with the two names swapped back it fits the markers
     within 1 cm. With the rule (``refit_s``) the server swaps the names within 0.1 s, and the
-    frames after carry the renamed bits; without it they stay swapped."""
+    frames after carry the renamed bits; without it they stay swapped. (Raising the leg names
+    nothing wrongly: see the mirror test below.)"""
     from dataclasses import replace
 
     from samba_server.labelling.rigid import RA, RK
@@ -978,10 +979,11 @@ def test_a_knee_and_its_ankle_named_the_other_way_round_in_a_high_kick_are_swapp
     rig = default_rig(4)
     stand = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
     hip = stand[RK] + [0.0, 0.0, float(DEFAULT_LENGTHS[6])]
-    n, at = 150, 100
-    # the straight leg swings forwards (+Y, the way the subject faces) and up by 110 degrees
+    n, at = 240, 180
+    # after 1.5 s standing, the straight leg swings forwards (+Y, the way the subject faces)
+    # and up by 130 degrees
     truth = np.repeat(stand[None], n, axis=0)
-    for i, th in enumerate(np.radians(110.0) * np.clip((np.arange(n) - 30) / 50, 0.0, 1.0)):
+    for i, th in enumerate(np.radians(130.0) * np.clip((np.arange(n) - 90) / 50, 0.0, 1.0)):
         for m in (RK, RA):
             y, z = (stand[m] - hip)[1:]
             truth[i, m, 1:] = hip[1:] + [y * np.cos(th) - z * np.sin(th), y * np.sin(th) + z * np.cos(th)]
@@ -1006,3 +1008,41 @@ def test_a_knee_and_its_ankle_named_the_other_way_round_in_a_high_kick_are_swapp
         assert lab.stats.refits == 1
     else:
         assert not right[at:].any()
+
+
+@pytest.mark.parametrize("window", [True, False])
+def test_a_straight_leg_raised_in_front_does_not_turn_the_names_round(window):
+    """A subject tracked for 1.5 s raises a straight leg 45 degrees in front. The markers so
+    named lie twice as far from a database body as their mirror image (the subject facing
+    the other way, the other leg stretched behind), and the database-fit rule renamed every
+    marker for its other side, for good. The mirror image turns a body round in one frame:
+    only names just identified can be mirrored, so the rule tries it only ``fit_mirror_s``
+    after an identification; the names stay right. Without that window every name is wrong."""
+    from dataclasses import replace
+
+    from samba_server.labelling.rigid import RA, RK
+    from samba_server.recon.reconstruct import Reconstructor
+    from samba_server.server import Server
+
+    rig = default_rig(4)
+    stand = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    hip = stand[RK] + [0.0, 0.0, float(DEFAULT_LENGTHS[6])]
+    n = 150
+    truth = np.repeat(stand[None], n, axis=0)
+    for i, th in enumerate(np.radians(45.0) * np.clip((np.arange(n) - 90) / 20, 0.0, 1.0)):
+        for m in (RK, RA):
+            y, z = (stand[m] - hip)[1:]
+            truth[i, m, 1:] = hip[1:] + [y * np.cos(th) - z * np.sin(th), y * np.sin(th) + z * np.cos(th)]
+    cfg = LabelConfig() if window else replace(LabelConfig(), fit_mirror_s=float("inf"))
+    server = Server(rig, reconstructor=Reconstructor(lengths=DEFAULT_LENGTHS), label_config=cfg)
+    rng = np.random.default_rng(8)
+    named = []
+    for i, m in enumerate(truth):
+        markers, _mask, _q = server.label_packets(_packets(rig, m, i / FPS, rng), i / FPS)
+        named.append(server.solve_markers(markers, i / FPS)[0])
+    right = _right(np.array(named), truth).all(axis=1)
+    assert right[:90].all()
+    if window:
+        assert right.all()
+    else:
+        assert not right[-20:].any()
