@@ -56,8 +56,8 @@ class PointsConfig:
     support_px: float = 2.0  #: a third view supports a point with a blob this close to its projection
     merged_px_per_radius: float = 0.8  #: extra tolerance of a merged blob, times its radius
     min_separation_m: float = 0.035  #: two accepted points are never closer
-    z_min: float = -0.3  #: capture volume, metres (world Z up, floor at 0)
-    z_max: float = 2.7
+    z_min: float = -0.3  #: capture volume, metres (world Z up, floor at 0) ...
+    z_max: float = 3.3  #: ... up to this (a climber's shoulders reach 2.7-2.8 m on a 1.7 m structure; 2.7 lost them)
     max_range_m: float = 12.0  #: points farther than this from every camera are rejected
     max_points: int = 24  #: at most this many points per frame (best first)
     double_size_ratio: float = 1.5  #: a point whose blobs are this many times a typical point's holds two markers

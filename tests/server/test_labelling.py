@@ -1046,3 +1046,28 @@ def test_a_straight_leg_raised_in_front_does_not_turn_the_names_round(window):
         assert right.all()
     else:
         assert not right[-20:].any()
+
+
+@pytest.mark.parametrize("ceiling", [3.3, 2.7])
+def test_a_subject_climbing_up_a_structure_keeps_every_name_up_there(ceiling):
+    """A subject identified on the floor climbs 1.4 m up a structure (a climb clip starts with
+    the shoulders 2.6-2.8 m up): tracking keeps all eight names. Points higher than the top of
+    the capture volume (``z_max``) are not markers; at the old 2.7 m the shoulders and wrists
+    left the volume and were lost up there."""
+    from dataclasses import replace
+
+    from samba_server.labelling.points import PointsConfig
+
+    rig = default_rig(4)
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    n = 240
+    rise = 1.4 * np.clip((np.arange(n) - 60) / 120, 0.0, 1.0)
+    truth = pose[None] + rise[:, None, None] * np.array([0.0, 0.0, 1.0])
+    assert truth[-1, :, 2].max() > 2.7
+    lab = Labeller(rig, config=replace(LabelConfig(), points=replace(PointsConfig(), z_max=ceiling)))
+    right = _right(_run(lab, rig, truth, np.random.default_rng(2)), truth).all(axis=1)
+    assert right[:60].all()
+    if ceiling > 2.8:
+        assert right[-30:].mean() >= 0.9  # up by the top of the cameras' images
+    else:
+        assert not right[-30:].any()
