@@ -960,6 +960,22 @@ def test_two_wrists_on_one_point_split_the_way_the_database_prefers():
     assert np.allclose(lab._wrists_split(out, pred, lateral, tracked), lateral)
 
 
+def _right_leg_raised(n: int, degrees: float, frames: int) -> np.ndarray:
+    """(n, 8, 3) markers: the hip-width standard pose for 1.5 s (90 frames), then the straight
+    right leg swung forwards (+Y, the way the subject faces) and up about the hip by
+    ``degrees`` over ``frames``, and held."""
+    from samba_server.labelling.rigid import RA, RK
+
+    stand = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    hip = stand[RK] + [0.0, 0.0, float(DEFAULT_LENGTHS[6])]
+    truth = np.repeat(stand[None], n, axis=0)
+    for i, th in enumerate(np.radians(degrees) * np.clip((np.arange(n) - 90) / frames, 0.0, 1.0)):
+        for m in (RK, RA):
+            y, z = (stand[m] - hip)[1:]
+            truth[i, m, 1:] = hip[1:] + [y * np.cos(th) - z * np.sin(th), y * np.sin(th) + z * np.cos(th)]
+    return truth
+
+
 @pytest.mark.parametrize("rule", [True, False])
 def test_a_knee_and_its_ankle_named_the_other_way_round_in_a_high_kick_are_swapped_back_by_the_solver(rule):
     """A dancer holds the right leg up in front, the ankle above the knee, and tracking has
@@ -977,17 +993,10 @@ def test_a_knee_and_its_ankle_named_the_other_way_round_in_a_high_kick_are_swapp
     from samba_server.server import Server
 
     rig = default_rig(4)
-    stand = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
-    hip = stand[RK] + [0.0, 0.0, float(DEFAULT_LENGTHS[6])]
     n, at = 240, 180
-    # after 1.5 s standing, the straight leg swings forwards (+Y, the way the subject faces)
-    # and up by 130 degrees
-    truth = np.repeat(stand[None], n, axis=0)
-    for i, th in enumerate(np.radians(130.0) * np.clip((np.arange(n) - 90) / 50, 0.0, 1.0)):
-        for m in (RK, RA):
-            y, z = (stand[m] - hip)[1:]
-            truth[i, m, 1:] = hip[1:] + [y * np.cos(th) - z * np.sin(th), y * np.sin(th) + z * np.cos(th)]
-    assert truth[-1, RA, 2] > truth[-1, RK, 2] > hip[2]
+    truth = _right_leg_raised(n, 130.0, 50)
+    hip_z = truth[0, RK, 2] + float(DEFAULT_LENGTHS[6])
+    assert truth[-1, RA, 2] > truth[-1, RK, 2] > hip_z
     cfg = LabelConfig() if rule else replace(LabelConfig(), refit_s=float("inf"))
     server = Server(rig, reconstructor=Reconstructor(lengths=DEFAULT_LENGTHS), label_config=cfg)
     lab, rng = server.labeller, np.random.default_rng(8)
@@ -1020,19 +1029,11 @@ def test_a_straight_leg_raised_in_front_does_not_turn_the_names_round(window):
     after an identification; the names stay right. Without that window every name is wrong."""
     from dataclasses import replace
 
-    from samba_server.labelling.rigid import RA, RK
     from samba_server.recon.reconstruct import Reconstructor
     from samba_server.server import Server
 
     rig = default_rig(4)
-    stand = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
-    hip = stand[RK] + [0.0, 0.0, float(DEFAULT_LENGTHS[6])]
-    n = 150
-    truth = np.repeat(stand[None], n, axis=0)
-    for i, th in enumerate(np.radians(45.0) * np.clip((np.arange(n) - 90) / 20, 0.0, 1.0)):
-        for m in (RK, RA):
-            y, z = (stand[m] - hip)[1:]
-            truth[i, m, 1:] = hip[1:] + [y * np.cos(th) - z * np.sin(th), y * np.sin(th) + z * np.cos(th)]
+    truth = _right_leg_raised(150, 45.0, 20)
     cfg = LabelConfig() if window else replace(LabelConfig(), fit_mirror_s=float("inf"))
     server = Server(rig, reconstructor=Reconstructor(lengths=DEFAULT_LENGTHS), label_config=cfg)
     rng = np.random.default_rng(8)
