@@ -734,7 +734,7 @@ class Labeller:
         subject round in one frame: only a fresh identification (``fit_mirror_s``) can have got
         that wrong, not names tracked since (a straight leg raised 45 degrees in front lies
         nearer a database body named as the other leg stretched behind, and was so renamed).
-        Three or more cameras."""
+        With two cameras the mirror image is always tried."""
         ok = ~(_FIT_MOVES & ~named).any(axis=1)
         # with two cameras mirrored identifications are common and the fit mends them later
         # (three 2-camera benchmark takes lost 2.6-8 points with the window)
