@@ -193,7 +193,7 @@ class Labeller:
         self._t_audit = -np.inf
         self._t_frame = self._t_prev = -np.inf  # this frame's and the previous frame's times
         self._free_hist: list[tuple[float, np.ndarray]] = []  # (t, free sure points (F, 3)) over the last second
-        self._glue: tuple[list, list] = ([], [])  # per side: (t, wrist-to-other-shoulder m, height difference m)
+        self._glue: tuple[list, list] = ([], [])  # per shoulder: (t, wrist-to-other-shoulder m, height difference m, wrist)
 
     # ------------------------------------------------------------------ feedback from the server
     def observe(self, t: float, joints: np.ndarray) -> None:
@@ -769,21 +769,27 @@ class Labeller:
                 a[[m, n]] = a[[n, m]]
 
     def _unglue(self, out: np.ndarray, assign: np.ndarray, t: float) -> None:
-        """A wrist that took its shoulder's point (the hand passed the shoulder) stays there,
-        rigidly a shoulder width from the other shoulder, while its own shoulder stays unnamed;
-        a hand does that for a moment, a shoulder always. After ``glued_wrist_s`` of it (within
+        """A wrist that took a shoulder's point (the hand passed its shoulder, or was held on
+        the other one) stays there, rigidly a shoulder width from the other shoulder, while
+        that shoulder stays unnamed; a hand does that for a moment, a shoulder always. Either
+        wrist may be the one (the one nearest a shoulder width from the other shoulder). After ``glued_wrist_s`` of it (within
         3 cm of the measured width, spread <= 1 cm, within 10 cm of the other shoulder's height) the
         point is renamed the shoulder and the wrist's track dropped (the skeleton predicts it).
         On the CMU clips a true wrist met this in 12 of 46 798 windows, each time within 20 cm of
         its own shoulder. out (8, 3), assign (8,) in place."""
         cfg = self.config
         named = np.isfinite(out).all(axis=1)
-        for side, (S, W, O) in enumerate(_ARMS):
+        for side, (S, _own, O) in enumerate(_ARMS):
             hist = self._glue[side]
-            if not (named[W] and named[O] and not named[S]):
+            wrists = [w for w in (LW, RW) if named[w]]
+            if not (wrists and named[O] and not named[S]):
                 hist.clear()
                 continue
-            hist.append((t, float(np.linalg.norm(out[W] - out[O])), float(out[W][2] - out[O][2])))
+            # either wrist: a hand held on the other side's shoulder takes its point too
+            W = min(wrists, key=lambda w: abs(float(np.linalg.norm(out[w] - out[O])) - self._body.shoulder_width))
+            if hist and hist[-1][3] != W:
+                hist.clear()
+            hist.append((t, float(np.linalg.norm(out[W] - out[O])), float(out[W][2] - out[O][2]), W))
             while hist and t - hist[0][0] > cfg.glued_wrist_s + 1e-6:
                 hist.pop(0)
             if t - hist[0][0] < cfg.glued_wrist_s - 0.02:

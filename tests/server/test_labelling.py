@@ -178,16 +178,20 @@ def test_tracking_gone_wrong_is_corrected_by_a_fresh_identification(audit):
 
 
 @pytest.mark.parametrize("unglue", [True, False])
-def test_a_wrist_that_took_its_shoulders_point_gives_it_back(unglue):
-    """A hand passing its shoulder can leave the wrist's track on the shoulder's point and the
-    shoulder unnamed; the fresh identification cannot switch (it names no more markers). A
-    wrist held a shoulder width from the other shoulder for 0.3 s is the shoulder: mid-take the
-    left wrist's track is moved onto the left shoulder and the shoulder's track dropped; the
-    names are right again within 0.5 s, and stay wrong without the rule."""
+@pytest.mark.parametrize("wrist", ["left", "right"])
+def test_a_wrist_that_took_a_shoulders_point_gives_it_back(unglue, wrist):
+    """A hand passing its shoulder (or held on the other shoulder, across the chest) can leave
+    the wrist's track on the shoulder's point and the shoulder unnamed; the fresh
+    identification cannot switch (it names no more markers). A wrist held a shoulder width
+    from the other shoulder for 0.3 s is the shoulder: mid-take the left (or right) wrist's
+    track is moved onto the left shoulder and the shoulder's track dropped; the names are
+    right again within 0.5 s, and stay wrong without the rule. (A right hand on the left
+    shoulder kept its point to the end of a whole-clip take until the rule took either wrist.)"""
     from dataclasses import replace
 
-    from samba_server.labelling.rigid import LS, LW
+    from samba_server.labelling.rigid import LS, LW, RW
 
+    W = LW if wrist == "left" else RW
     rig = default_rig(4)
     truth = _motion(3.0)
     cfg = LabelConfig() if unglue else replace(LabelConfig(), glued_wrist_s=float("inf"))
@@ -197,14 +201,14 @@ def test_a_wrist_that_took_its_shoulders_point_gives_it_back(unglue):
     named = []
     for i, m in enumerate(truth):
         if i == 60:
-            lab._pos[LW], lab._vel[LW] = lab._pos[LS], lab._vel[LS]
+            lab._pos[W], lab._vel[W] = lab._pos[LS], lab._vel[LS]
             lab._pos[LS], lab._seen[LS] = np.nan, -np.inf
         got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
         named.append(got)
     named = np.array(named)
     right = _right(named, truth).all(axis=1)
     assert right[:60].all()
-    assert np.linalg.norm(named[61, LW] - truth[61, LS]) < 0.02  # the wrist did take the shoulder's point
+    assert np.linalg.norm(named[61, W] - truth[61, LS]) < 0.02  # the wrist did take the shoulder's point
     if unglue:
         assert right[60 + int(0.5 * FPS):].all()
     else:
