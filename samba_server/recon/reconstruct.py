@@ -364,10 +364,7 @@ class Reconstructor:
         return PoseResult(np.full((N_JOINTS, 3), np.nan), float("nan"), n, 0, "unsolved")
 
     def _solve(self, markers: np.ndarray, t: float) -> PoseResult:
-        cfg = self.config
-        has_pred = self._hist.n > 0 and t - self._hist.t_seen <= cfg.max_gap
-        if not has_pred and self._hist.n:
-            self.reset()
+        self._hist = self._current(self._hist, t)
         status, q, R, o, d, iters, resid, n_seen, mk = self._frame(markers, t, self._hist)
         if status == 2:
             return PoseResult(q, float("nan"), int(n_seen), 0, "unsolved")
@@ -378,6 +375,11 @@ class Reconstructor:
         if status == 0:
             h.t_seen = t
         return PoseResult(q, float(resid), int(n_seen), int(iters), "solved" if status == 0 else "bridged", (R, o, d))
+
+    def _current(self, h: _History, t: float) -> _History:
+        """The temporal state h if it can still predict at t s, else a fresh one (a long gap
+        forgets the history, as :meth:`reset`)."""
+        return h if h.n == 0 or t - h.t_seen <= self.config.max_gap else _History()
 
     def _frame(self, markers: np.ndarray, t: float, h: _History) -> tuple:
         """The compiled per-frame solve (:func:`kernels.frame`) of markers (8, 3) at t s from the
@@ -413,9 +415,7 @@ class Reconstructor:
     def trial(self, markers: np.ndarray, t: float, state: _History) -> float:
         """rms marker residual (m) of solving markers (8, 3) at t s from ``state`` (a
         :meth:`checkpoint`), changing nothing; NaN when it would not solve or only bridge."""
-        has_pred = state.n > 0 and t - state.t_seen <= self.config.max_gap
-        status, *_rest, resid, _n, _mk = self._frame(np.asarray(markers, float), float(t),
-                                                   state if has_pred or not state.n else _History())
+        status, *_rest, resid, _n, _mk = self._frame(np.asarray(markers, float), float(t), self._current(state, t))
         return float(resid) if status == 0 else float("nan")
 
 
