@@ -21,7 +21,7 @@ import logging
 import os
 import tempfile
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -219,6 +219,24 @@ def write_videos(out_dir: Path, cameras: list[RenderedCamera], fps: float, fourc
     return paths
 
 
+def _blackout_notes(t: np.ndarray, cfg: SimConfig) -> list[str]:
+    """Warnings for ``cfg.blackout`` windows (start, seconds) that miss the take's frame times
+    t (F,) s, wholly or in part: a blackout asked for and not rendered must not pass silently."""
+    notes: list[str] = []
+    if not len(t):
+        return notes
+    lo, end = float(t[0]), float(t[-1]) + 1.0 / cfg.fps  # the last frame lasts one period
+    for start, seconds in cfg.blackout:
+        hit = int(blackout_frames(t, replace(cfg, blackout=((start, seconds),))).sum())
+        if hit == 0:
+            notes.append(f"blackout {start:g}+{seconds:g} s lies outside the take ({lo:g}-{end:.2f} s): "
+                         "no frame blacked out")
+        elif start + seconds > end + 1e-9 or start < lo - 1e-9:
+            notes.append(f"blackout {start:g}+{seconds:g} s runs past the take ({lo:g}-{end:.2f} s): "
+                         f"{hit / cfg.fps:.2f} s blacked out")
+    return notes
+
+
 def make_take(out_dir: str | os.PathLike, source: str | os.PathLike | np.ndarray | None = None,
               rig: CameraRig | int = 2, config: SimConfig | None = None, seed: int = 0,
               start: float = 0.0, seconds: float | None = None, t: np.ndarray | None = None,
@@ -269,6 +287,9 @@ def make_take(out_dir: str | os.PathLike, source: str | os.PathLike | np.ndarray
         shown[:, list(MARKER_JOINT)] = markers  # the cameras see the landmarks
     cams = render_take(shown, tt, rig, cfg, seed=seed)
     dark = blackout_frames(tt, cfg)
+    for note in _blackout_notes(tt, cfg):
+        notes.append(note)
+        (on_warning or log.warning)(note)
     out = Path(out_dir)
     videos: list[Path] = []
     fourcc = ""

@@ -176,6 +176,20 @@ def test_blackout_hides_every_marker_in_every_camera(tmp_path) -> None:
         assert lit > 100  # without the blackout the blobs are there
 
 
+def test_blackout_outside_the_take_is_a_warning_not_silence() -> None:
+    """A blackout asked for past the end of the take (a clip shorter than the user thought)
+    renders nothing, or only its start: the take says so instead of passing it silently."""
+    said: list[str] = []
+    windows = ((0.5, 0.2), (2.4, 1.0), (9.0, 1.0))  # inside, running past the end, past the end
+    take = make_take("unused", None, rig=2, seconds=1.0, seed=4, config=SimConfig(blackout=windows),
+                     write=False, on_warning=said.append)
+    end = len(take.t) / 60.0  # 2.6 s lead-in and motion
+    assert said == take.notes and len(said) == 2
+    assert said[0] == f"blackout 2.4+1 s runs past the take (0-{end:.2f} s): {end - 2.4:.2f} s blacked out"
+    assert said[1] == f"blackout 9+1 s lies outside the take (0-{end:.2f} s): no frame blacked out"
+    assert take.blackout.sum() == 12 + round((end - 2.4) * 60)
+
+
 # ------------------------------------------------------------------ codecs
 
 
