@@ -89,6 +89,58 @@ def _rot_z(a: float) -> np.ndarray:
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
 
 
+#: the blend's kinematic tree, parent before child: (parent, child); -1 = the hip midpoint,
+#: -2 = the shoulder midpoint. The hips and the shoulders hang from their midpoints.
+_TREE: tuple[tuple[int, int], ...] = (
+    (-1, J["left_hip"]), (-1, J["right_hip"]), (-1, -2),
+    (-2, J["left_shoulder"]), (-2, J["right_shoulder"]), (-2, J["head"]),
+    (J["left_shoulder"], J["left_elbow"]), (J["left_elbow"], J["left_wrist"]),
+    (J["right_shoulder"], J["right_elbow"]), (J["right_elbow"], J["right_wrist"]),
+    (J["left_hip"], J["left_knee"]), (J["left_knee"], J["left_ankle"]),
+    (J["right_hip"], J["right_knee"]), (J["right_knee"], J["right_ankle"]),
+)
+
+
+def _slerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
+    """Unit vector (3,) a fraction w of the way along the great circle from unit a to unit b (3,);
+    opposite vectors turn about a horizontal axis across a (the path is then not unique)."""
+    theta = float(np.arccos(np.clip(a @ b, -1.0, 1.0)))
+    if theta < 1e-9:
+        return a.copy()
+    if np.pi - theta < 1e-6:
+        axis = np.cross(a, (0.0, 0.0, 1.0) if abs(a[2]) < 0.9 else (1.0, 0.0, 0.0))
+        across = np.cross(axis / np.linalg.norm(axis), a)
+        return np.cos(w * np.pi) * a + np.sin(w * np.pi) * across
+    return (np.sin((1.0 - w) * theta) * a + np.sin(w * theta) * b) / np.sin(theta)
+
+
+def _rigid_blend(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
+    """Joints (13, 3) a fraction w (0..1) of the way from pose a to pose b (13, 3), both with
+    the hip midpoint at the origin: every bone of :data:`_TREE` turns along the great circle
+    between its two directions and changes length linearly, so a body stays a body (blending
+    the positions instead shortened an arm going from straight out to hanging by 25 %)."""
+    def point(j: np.ndarray, k: int) -> np.ndarray:
+        if k == -1:
+            return 0.5 * (j[J["left_hip"]] + j[J["right_hip"]])
+        if k == -2:
+            return 0.5 * (j[J["left_shoulder"]] + j[J["right_shoulder"]])
+        return j[k]
+
+    out = np.zeros_like(a)
+    placed = {-1: (1 - w) * point(a, -1) + w * point(b, -1)}
+    for parent, child in _TREE:
+        va, vb = point(a, child) - point(a, parent), point(b, child) - point(b, parent)
+        la, lb = float(np.linalg.norm(va)), float(np.linalg.norm(vb))
+        if la < 1e-12 or lb < 1e-12:
+            v = (1 - w) * va + w * vb
+        else:
+            v = ((1 - w) * la + w * lb) * _slerp(va / la, vb / lb, w)
+        placed[child] = placed[parent] + v
+        if child >= 0:
+            out[child] = placed[child]
+    return out
+
+
 #: m: a take starting higher than this above its floor gets its T-pose on the floor
 FLOOR_SLACK_M = 0.05
 
@@ -130,7 +182,7 @@ def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1
     local_first = (first - hip) @ _rot_z(-yaw).T  # first frame turned to face +Y
 
     def at(w: float) -> np.ndarray:
-        local = (1 - w) * local_tp + w * local_first
+        local = _rigid_blend(local_tp, local_first, w)
         centre = (1 - w) * tp_hip + w * hip
         return local @ _rot_z(w * yaw).T + centre
 

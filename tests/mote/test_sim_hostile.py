@@ -11,7 +11,7 @@ import pytest
 
 from samba_common.body import bone_lengths
 from samba_common.calib import default_rig
-from samba_common.skeleton import BONE_TYPES, J, MARKER_JOINT
+from samba_common.skeleton import BONE_TYPES, BONES, JOINT_NAMES, J, MARKER_JOINT
 from samba_mote.cli.sim import main as sim_main
 from samba_mote.sim import SimConfig, load_motion, make_take, prepare_motion, tpose
 from samba_mote.sim.motion import DEFAULT_LENGTHS
@@ -108,6 +108,22 @@ def test_lead_in_walks_from_the_pose_place_without_jumps(pose_at) -> None:
     m = j[: n + 1, list(MARKER_JOINT)]
     speed = np.linalg.norm(np.diff(m, axis=0), axis=2) * cfg.fps
     assert speed.max() < 3.0
+
+
+@needs_walk
+@pytest.mark.parametrize("pose_at", [(0.0, 0.0), (1.5, -1.0)])
+def test_lead_in_keeps_the_body_rigid(pose_at) -> None:
+    """From the standard pose (arms straight out) into the clip's first frame (arms hanging)
+    every bone keeps its length: a person does not shrink on the way (blending the joint
+    positions shortened the upper arms by 25 %, and the labelling's rigid checks failed there)."""
+    joints, t, _ = load_motion(WALK)
+    j, _tt, n = prepare_motion(joints, t, SimConfig(pose_at=pose_at))
+    for a, b in BONES:
+        length = np.linalg.norm(j[: n + 1, a] - j[: n + 1, b], axis=1)
+        lo, hi = sorted((length[0], length[n]))  # the pose's and the clip's (sides averaged in the pose)
+        assert lo - 1e-9 <= length.min() and length.max() <= hi + 1e-9, (JOINT_NAMES[a], JOINT_NAMES[b])
+    arm = np.linalg.norm(j[: n + 1, J["right_elbow"]] - j[: n + 1, J["right_shoulder"]], axis=1)
+    assert np.ptp(arm) < 0.01 and not np.allclose(j[n, J["right_wrist"]], j[0, J["right_wrist"]], atol=0.3)
 
 
 @needs_walk
