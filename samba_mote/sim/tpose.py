@@ -160,8 +160,9 @@ def prepend_tpose(joints: np.ndarray, t: np.ndarray, fps: float, hold: float = 1
     at ``pose_at`` (x, y) m, or where the take starts if None.
 
     The blend moves the hips along the straight line from the pose to the first frame's
-    position, turns the body about the vertical axis (shortest way) and moves the joints
-    from the T-pose to the first frame, all with one smoothstep weight, so nothing jumps.
+    position, turns the body about the vertical axis (shortest way) and turns every bone from
+    its T-pose direction to its first-frame direction (:func:`_rigid_blend`: bones keep their
+    lengths), all with one smoothstep weight, so nothing jumps.
     It lasts max(``transition``, distance / ``walk_speed``, long enough that no joint moves
     faster than ``max_speed`` m/s). Returns (joints (P+F, 13, 3), t (P+F,) from 0, P).
     """
