@@ -23,12 +23,21 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   correction; a rename the backward pass does not confirm may itself be the mistake. A mix
   that would name one point twice keeps the forward names;
 - where the forward pass names nothing and the backward names are not doubted so, the frame
-  takes the backward names (the wait for a clear identification after a blackout).
+  takes the backward names (the wait for a clear identification after a blackout);
+- where the two namings differ, the forward names descend from a coin-flip identification
+  (margin < ``COIN_M``; never the take's first, from the standard pose) and the backward ones
+  from a clear one (>= ``CLEAR_M``), the frame takes the backward names if they name as many
+  markers, or at least 4. After a blackout the forward pass may identify a subject whose mirror
+  image scores the same (swordplay on another body was named all left for right for the last
+  3.3 s of the take) and no rule renames it; the backward pass reached those frames tracking
+  from a clear identification at the end of the take. (Tried: the clearer identification
+  winning wherever the two differ, by 0.1 m: -1.0 point on the benchmark, whose backward
+  passes often go wrong after a clear identification.)
 
-A naming that neither pass corrected is not overruled by the other: the backward pass starts
-mid-motion at the end of the take, with no standard pose, and its first identification is
-the weaker one (tried: preferring the pass that had tracked longer lost 17 points on a take
-whose backward identification named the legs the wrong way round). The chosen markers are
+Otherwise a naming that neither pass corrected is not overruled by the other: the backward
+pass starts mid-motion at the end of the take, with no standard pose, and its first
+identification is often the weaker one (tried: preferring the pass that had tracked longer
+lost 17 points on a take whose backward identification named the legs the wrong way round). The chosen markers are
 then solved forwards by a new solver built as the live one and backwards by one for the
 subject it measured, the two merged per frame
 (:func:`~samba_server.recon.reconstruct.solve_both_ways`).
@@ -54,16 +63,26 @@ log = logging.getLogger(__name__)
 
 __all__ = ["PassResult", "backward_pass", "choose", "relabel_both_ways"]
 
+#: m (LabelQuality.margin_m, 0.1 m per identification score unit): an identification whose
+#: best labelling beat the runner-up by less than this was a coin flip (after a blackout the
+#: mirror image of a subject can score the same) ...
+COIN_M = 0.01
+#: ... and one by this much (the labelling's ``min_margin``: taken at once) was clear
+CLEAR_M = 0.06
+
 
 @dataclass
 class PassResult:
     """One labelling pass over F frames. markers: (F, 8, 3) world m (NaN = not named);
     renamed: (F,) int, bit m set where the pass found marker m's name, held until the frame
-    before, wrong and replaced it (``LabelQuality.renamed``); margin: (F,) label margin m."""
+    before, wrong and replaced it (``LabelQuality.renamed``); margin: (F,) label margin m;
+    identified: (F,) the margin (m, ``LabelQuality.margin_m``) of the identification that
+    named the frame, NaN on the frames tracking named (None: no identification known)."""
 
     markers: np.ndarray
     renamed: np.ndarray
     margin: np.ndarray
+    identified: np.ndarray | None = None
 
 
 def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=None) -> PassResult | None:
@@ -79,13 +98,16 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
     twin = Server(server.rig, None, rec.again(subject), ServerConfig(max_lag_ms=0.0, keep_history=False),
                   tri_config=server.triangulator.config, label_config=server.labeller.config)
     F = len(t)
-    out = PassResult(np.full((F, N_MARKERS, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan))
+    out = PassResult(np.full((F, N_MARKERS, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan),
+                     np.full(F, np.nan))
     t_end = float(t[-1]) if F else 0.0
     for k in range(F - 1, -1, -1):
         tb = t_end - float(t[k])  # backwards time runs forwards
         markers, _mask, q = twin.label_packets(packets[k], tb)
         markers = twin.solve_markers(markers, tb)[0]
         out.markers[k], out.margin[k], out.renamed[k] = markers, q.margin_m, q.renamed
+        if q.mode == "identified":
+            out.identified[k] = q.margin_m
         if progress is not None:
             progress.update(1)
     return out
@@ -110,6 +132,25 @@ def _doubted(renamed: np.ndarray, named: np.ndarray, t: np.ndarray, window_s: fl
     return out
 
 
+def _lineage(identified: np.ndarray | None, named: np.ndarray, forward: bool) -> np.ndarray:
+    """(F,) the margin (m) of the identification each frame's names descend from in the pass's
+    direction of travel (forward: the last one before or at the frame; backward: after or at
+    it), NaN where the pass named nothing since (or none is known). identified: (F,) margins
+    of the identification frames, NaN elsewhere; named: (F,) bool."""
+    F = len(named)
+    out = np.full(F, np.nan)
+    if identified is None:
+        return out
+    cur = np.nan
+    for k in (range(F) if forward else range(F - 1, -1, -1)):
+        if not named[k]:
+            cur = np.nan
+        elif np.isfinite(identified[k]):
+            cur = float(identified[k])
+        out[k] = cur
+    return out
+
+
 def _doubles(markers: np.ndarray) -> int:
     """Pairs of named markers (8, 3) within 1 cm of each other: one point named twice."""
     named = markers[np.isfinite(markers).all(axis=1)]
@@ -122,7 +163,10 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     doubted its own (a rename the backward naming confirms: the renamed markers, or every
     marker where the two namings agree as a whole at the rename) and the backward pass names
     it and did not doubt it (with the markers the forward pass left unnamed in that frame), and
-    every name of a frame the forward pass names nothing in (see the module docstring).
+    every name of a frame the forward pass names nothing in (see the module docstring); and
+    every name of a frame whose forward names descend from a coin-flip identification (margin
+    < ``COIN_M``, not the take's first) while the backward ones descend from a clear one (>=
+    ``CLEAR_M``) and name as many markers, or at least 4.
     A frame whose mixed names would name one point twice more often than the forward names
     keeps the forward ones. Returns ((F, 8, 3) markers, (F,) bool: a name taken from the
     backward pass)."""
@@ -144,12 +188,22 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     # markers at the same points (tracking them, not renaming them)
     agree_b = alike & ~renamed
     doubt_b = _doubted(bwd.renamed.astype(np.int64) & agree_b, nb.any(axis=1), t, window_s, forward=False)
+    first = fwd.identified.copy() if fwd.identified is not None else None
+    if first is not None and np.isfinite(first).any():
+        first[np.flatnonzero(np.isfinite(first))[0]] = np.inf  # the standard pose's: no coin flip
+    lin_f = _lineage(first, nf.any(axis=1), forward=True)
+    lin_b = _lineage(bwd.identified, nb.any(axis=1), forward=False)
+    flip = (lin_f < COIN_M) & (lin_b >= CLEAR_M) & (nb.sum(axis=1) >= np.minimum(nf.sum(axis=1), 4)) \
+        & ~same.all(axis=1)
     markers = fwd.markers.copy()
     from_b = np.zeros(len(t), bool)
     for k in range(len(t)):
         if not nf[k].any():
             if nb[k].any() and not doubt_b[k]:
                 markers[k], from_b[k] = bwd.markers[k], True
+            continue
+        if flip[k] and not doubt_b[k] and _doubles(bwd.markers[k]) <= _doubles(fwd.markers[k]):
+            markers[k], from_b[k] = bwd.markers[k], True
             continue
         sure_b = nb[k] & ~bit_markers(doubt_b[k])  # backward names, not doubted
         take = bit_markers(doubt_f[k]) & sure_b & ~same[k]

@@ -95,10 +95,12 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     open_ = [True] * len(its)
     rig_index = [server.rig.names.index(n) for n in names]
     kept: list[list] = []  # per frame, per rig camera: the packet (both_ways)
-    renamed_by_seq: dict[int, int] = {}  # pose seq -> the markers its labelling renamed (both_ways)
+    # pose seq -> the markers its labelling renamed, and its identification's margin (NaN: tracked)
+    renamed_by_seq: dict[int, tuple[int, float]] = {}
 
     def note_renamed(msg) -> None:  # runs right after its frame was labelled: the last quality is that frame's
-        renamed_by_seq[msg.seq] = server.labeller.last_quality.renamed
+        q = server.labeller.last_quality
+        renamed_by_seq[msg.seq] = (q.renamed, q.margin_m if q.mode == "identified" else float("nan"))
 
     if both_ways:
         server.pose_listeners.append(note_renamed)
@@ -137,13 +139,15 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     margin = np.full(n_frames, np.nan)
     n_markers = np.zeros(n_frames, int)
     renamed = np.zeros(n_frames, np.int64)
+    identified = np.full(n_frames, np.nan)
     t_live = np.arange(n_frames) / fps  # the server's own frame times (s since its first frame)
     t0_ns = server.poses[0].t_ns if server.poses else base
     for p in server.poses:
         k = int(round((p.t_ns - base) / period))
         if 0 <= k < n_frames:
             joints[k], markers[k], residual[k], n_markers[k] = p.joints, p.markers, p.residual_m, p.n_markers
-            margin[k], renamed[k] = p.label_margin_m, renamed_by_seq.get(p.seq, 0)
+            margin[k] = p.label_margin_m
+            renamed[k], identified[k] = renamed_by_seq.get(p.seq, (0, np.nan))
             t_live[k] = (p.t_ns - t0_ns) / 1e9
     t = np.arange(n_frames) / fps
     extra = {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin}
@@ -151,7 +155,8 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
         from .both_ways import PassResult, relabel_both_ways
 
         kept += [[None] * len(server.rig.names) for _ in range(n_frames - len(kept))]
-        again = relabel_both_ways(server, kept[:n_frames], t_live, PassResult(markers, renamed, margin), progress)
+        again = relabel_both_ways(server, kept[:n_frames], t_live, PassResult(markers, renamed, margin, identified),
+                                  progress)
         if again is not None:
             live = {"joints": joints, "markers": markers}
             joints, extra = again

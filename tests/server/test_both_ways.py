@@ -133,3 +133,39 @@ def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
     a[20:30] = np.nan  # forward names nothing: the backward names fill in
     markers, from_b = choose(fwd, bwd, t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(20, 30)) and np.array_equal(markers[20:30], b[20:30])
+
+
+def test_names_from_a_coin_flip_identification_give_way_to_a_clear_backward_naming():
+    """After a blackout (frames 100-129, nothing named) the forward pass identifies the subject
+    with a margin of 0 (the mirror image scored the same) and tracks those names to the end of
+    the take, renaming nothing; the backward pass tracks from a clear identification at the
+    end. Where they differ the backward names win. Not when the forward identification was
+    only unclear (not a coin flip), nor when the backward one was no clearer, nor over the
+    names descending from the standard pose (the take's first identification), nor where the
+    backward pass names fewer than 4 markers (and fewer than the forward pass)."""
+    from samba_server.both_ways import CLEAR_M, COIN_M
+
+    F = 301
+    t = np.arange(F) / FPS
+    right = np.arange(8 * 3, dtype=float).reshape(8, 3) / 10.0
+    a = np.repeat(right[None], F, axis=0)
+    a[131:] = right[MIRROR]  # forward: the mirror image after the blackout
+    b = np.repeat(right[None], F, axis=0)
+    b[:100] += 0.05  # backward differs before the blackout too (a slip of its own)
+    a[100:130] = b[100:130] = np.nan
+    idf, idb = np.full(F, np.nan), np.full(F, np.nan)
+    idf[0], idf[130], idb[300], idb[99] = 0.0, 0.0, CLEAR_M, 0.5
+    fwd = PassResult(a, np.zeros(F, np.int64), np.zeros(F), idf)
+    bwd = PassResult(b, np.zeros(F, np.int64), np.zeros(F), idb)
+    markers, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(131, F))
+    assert np.allclose(markers[131:], right) and np.allclose(markers[:100], right)
+    idf[130] = COIN_M  # unclear, not a coin flip: the forward names stay
+    assert not choose(fwd, bwd, t)[1].any()
+    idf[130], idb[300] = 0.0, CLEAR_M - 0.01  # the backward identification not clear either
+    assert not choose(fwd, bwd, t)[1].any()
+    idb[300] = CLEAR_M
+    assert not choose(PassResult(a, fwd.renamed, fwd.margin), bwd, t)[1].any()  # no margins known: as before
+    b[200:, :5] = np.nan  # the backward pass names 3 markers there: those frames stay forward
+    _m, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(131, 200))
