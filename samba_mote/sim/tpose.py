@@ -115,10 +115,10 @@ def _slerp(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
 
 
 def _rigid_blend(a: np.ndarray, b: np.ndarray, w: float) -> np.ndarray:
-    """Joints (13, 3) a fraction w (0..1) of the way from pose a to pose b (13, 3), both with
-    the hip midpoint at the origin: every bone of :data:`_TREE` turns along the great circle
-    between its two directions and changes length linearly, so a body stays a body (blending
-    the positions instead shortened an arm going from straight out to hanging by 25 %)."""
+    """Joints (13, 3) a fraction w (0..1) of the way from pose a to pose b (13, 3, metres): the
+    hip midpoint moves on the straight line, every bone of :data:`_TREE` turns along the great
+    circle between its two directions and changes length linearly, so a body stays a body
+    (blending the positions instead shortened an arm going from straight out to hanging by 25 %)."""
     def point(j: np.ndarray, k: int) -> np.ndarray:
         if k == -1:
             return 0.5 * (j[J["left_hip"]] + j[J["right_hip"]])
