@@ -96,11 +96,11 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     rig_index = [server.rig.names.index(n) for n in names]
     kept: list[list] = []  # per frame, per rig camera: the packet (both_ways)
     # pose seq -> the markers its labelling renamed, and its identification's margin (NaN: tracked)
-    renamed_by_seq: dict[int, tuple[int, float]] = {}
+    labelled_by_seq: dict[int, tuple[int, float]] = {}
 
     def note_renamed(msg) -> None:  # runs right after its frame was labelled: the last quality is that frame's
         q = server.labeller.last_quality
-        renamed_by_seq[msg.seq] = (q.renamed, q.margin_m if q.mode == "identified" else float("nan"))
+        labelled_by_seq[msg.seq] = (q.renamed, q.margin_m if q.mode == "identified" else float("nan"))
 
     if both_ways:
         server.pose_listeners.append(note_renamed)
@@ -147,7 +147,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
         if 0 <= k < n_frames:
             joints[k], markers[k], residual[k], n_markers[k] = p.joints, p.markers, p.residual_m, p.n_markers
             margin[k] = p.label_margin_m
-            renamed[k], identified[k] = renamed_by_seq.get(p.seq, (0, np.nan))
+            renamed[k], identified[k] = labelled_by_seq.get(p.seq, (0, np.nan))
             t_live[k] = (p.t_ns - t0_ns) / 1e9
     t = np.arange(n_frames) / fps
     extra = {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin}
