@@ -188,10 +188,10 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     # markers at the same points (tracking them, not renaming them)
     agree_b = alike & ~renamed
     doubt_b = _doubted(bwd.renamed.astype(np.int64) & agree_b, nb.any(axis=1), t, window_s, forward=False)
-    first = fwd.identified.copy() if fwd.identified is not None else None
-    if first is not None and np.isfinite(first).any():
-        first[np.flatnonzero(np.isfinite(first))[0]] = np.inf  # the standard pose's: no coin flip
-    lin_f = _lineage(first, nf.any(axis=1), forward=True)
+    ident_f = fwd.identified.copy() if fwd.identified is not None else None
+    if ident_f is not None and np.isfinite(ident_f).any():
+        ident_f[np.flatnonzero(np.isfinite(ident_f))[0]] = np.inf  # the standard pose's: no coin flip
+    lin_f = _lineage(ident_f, nf.any(axis=1), forward=True)
     lin_b = _lineage(bwd.identified, nb.any(axis=1), forward=False)
     flip = (lin_f < COIN_M) & (lin_b >= CLEAR_M) & (nb.sum(axis=1) >= np.minimum(nf.sum(axis=1), 4)) \
         & ~same.all(axis=1)

@@ -786,10 +786,11 @@ class Labeller:
                 hist.clear()
                 continue
             # either wrist: a hand held on the other side's shoulder takes its point too
-            W = min(wrists, key=lambda w: abs(float(np.linalg.norm(out[w] - out[O])) - self._body.shoulder_width))
+            dist = {w: float(np.linalg.norm(out[w] - out[O])) for w in wrists}
+            W = min(wrists, key=lambda w: abs(dist[w] - self._body.shoulder_width))
             if hist and hist[-1][3] != W:
                 hist.clear()
-            hist.append((t, float(np.linalg.norm(out[W] - out[O])), float(out[W][2] - out[O][2]), W))
+            hist.append((t, dist[W], float(out[W][2] - out[O][2]), W))
             while hist and t - hist[0][0] > cfg.glued_wrist_s + 1e-6:
                 hist.pop(0)
             if t - hist[0][0] < cfg.glued_wrist_s - 0.02:
