@@ -24,6 +24,7 @@ live labels exactly.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 from dataclasses import dataclass, field
@@ -62,6 +63,8 @@ class LabelConfig:
     split_sigma_px: float = float("inf")  #: noise of the separation a merged blob's moments measure, to split two markers on one point by it (inf: off, the default: see docs/labelling.md; 0.5 on the simulator's blobs)
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
+    rescue_m: float = 0.06  #: a tracked marker with no point is triangulated from two views' blobs within this of its prediction (0: never) ...
+    rescue_px: float = 0.3  #: ... that meet within this (rms reprojection error, px)
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
     wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
@@ -302,6 +305,7 @@ class Labeller:
         if n_pred >= self.config.min_tracked and len(pts):
             out, q, assign = self._track(pts, pred, gate, t)
             self._unglue(out, assign, t)
+            q.n_labelled += self._rescue(pts, out, assign, pred, t)
             explained = q.n_labelled >= min(len(pts), N_MARKERS) - 2 or q.n_labelled >= 6
             if explained:
                 self._t_good = t
@@ -462,6 +466,67 @@ class Labeller:
         self.stats.overridden += over
         resid = float(np.sqrt(np.mean(d_eff[arow[named], named] ** 2))) if named.size else float("nan")
         return out, LabelQuality(int(named.size), P, margin, resid, "tracking", over), assign
+
+    def _rescue(self, pts: Points3D, out: np.ndarray, assign: np.ndarray, pred: np.ndarray, t: float) -> int:
+        """Markers tracked until the last frame (seen within ``track_timeout``) that no point
+        stands for, where two views each hold a blob near the marker's projection (a hand in front
+        of the chest hidden from two cameras: the other two see it, but a point of the knee behind
+        it, seen in three views, took its blob in one of them). The two blobs, at least one used
+        by no point, are triangulated; the point is taken when it meets both rays within
+        ``rescue_px`` (a marker's own two blobs meet within 0.25 px; a blob pair that only
+        happens to lie near the prediction mostly does not), lies within ``rescue_m`` of the
+        prediction and by that much nearer it than any other marker's, is no other point and lies
+        in the capture volume.
+        out (8, 3), assign (8,) (the point per marker, -1 none) from tracking; pred (8, 3). Fills
+        out in place; returns how many markers it named. Three cameras or more: with two, a
+        marker the points stage left without a point is mostly a ghost pair it rejected
+        (swordplay lost 8 points)."""
+        cfg = self.config
+        age = t - self._seen
+        todo = [m for m in range(N_MARKERS) if assign[m] < 0 and not np.isfinite(out[m]).all()
+                and age[m] <= cfg.track_timeout and np.isfinite(pred[m]).all()]
+        C = len(self._views)
+        if not todo or cfg.rescue_m <= 0 or C < 3:  # with two cameras every point is a 2-view point
+            return 0
+        tri = self.points.tri
+        proj, depth = tri.project(pred[todo])  # (C, M, 2) px, (C, M) m
+        taken = [set(pts.blob[c][pts.blob[c] >= 0].tolist()) for c in range(C)]
+        found = 0
+        for i, m in enumerate(todo):
+            near: list[list[int]] = []
+            for c, v in enumerate(self._views):
+                if len(v) == 0 or not depth[c, i] > 0.1:
+                    near.append([])
+                    continue
+                r = cfg.rescue_m * self.points.f[c] / depth[c, i] + 1.0
+                dist = np.linalg.norm(v.uv - proj[c, i], axis=1)
+                near.append(np.flatnonzero(dist <= r).tolist())
+            combos = [(a, b, ba, bb) for a, b in itertools.combinations(range(C), 2)
+                      for ba in near[a] for bb in near[b] if ba not in taken[a] or bb not in taken[b]]
+            if not combos:
+                continue
+            uv = np.full((C, len(combos), 2), np.nan)
+            for k, (a, b, ba, bb) in enumerate(combos):
+                uv[a, k], uv[b, k] = self._views[a].uv[ba], self._views[b].uv[bb]
+            res = tri.triangulate(uv)
+            dp = np.linalg.norm(res.points - pred[m], axis=1)
+            others = np.r_[pts.X, out[np.isfinite(out).all(axis=1)]]
+            apart = np.ones(len(combos), bool)
+            if len(others):
+                apart = np.min(np.linalg.norm(res.points[:, None] - others[None], axis=2), axis=1) \
+                    >= cfg.points.min_separation_m
+            # and nearer this marker's prediction than any other's (feet crossing: the other
+            # ankle's blobs, its point missing too, are not this one's)
+            rival = np.delete(pred, m, axis=0)
+            rival = rival[np.isfinite(rival).all(axis=1)]
+            if len(rival):
+                apart &= np.min(np.linalg.norm(res.points[:, None] - rival[None], axis=2), axis=1) >= dp + cfg.rescue_m
+            good = np.flatnonzero(np.isfinite(dp) & (dp <= cfg.rescue_m) & (res.error <= cfg.rescue_px) & apart
+                                  & self.points.plausible(res.points))
+            if good.size:
+                out[m] = res.points[good[np.argmin(dp[good])]]
+                found += 1
+        return found
 
     def _recover(self, pts: Points3D, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
                  row_pt: np.ndarray) -> None:

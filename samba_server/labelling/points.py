@@ -204,7 +204,7 @@ class PointReconstructor:
             if sel.any():
                 uv[c, sel] = views[c].uv[jb_all[sel]]
         pair = self.tri.triangulate(uv)
-        ok = self._plausible(pair.points)
+        ok = self.plausible(pair.points)
         if not ok.any():
             return Points3D.empty(C)
         X = pair.points[ok]
@@ -250,7 +250,7 @@ class PointReconstructor:
         used &= blob >= 0
         blob = np.where(used, blob, -1)
         n_views = used.sum(axis=0)
-        ok = (n_views >= 2) & self._plausible(X)
+        ok = (n_views >= 2) & self.plausible(X)
         # views in whose image a point falls with no blob (the fewest over the candidates that
         # make the point: their pair triangulations differ a little)
         missing = np.full(len(first), C, np.int64)
@@ -415,7 +415,7 @@ class PointReconstructor:
         for r in np.flatnonzero(np.isin(idx, list(moved))):
             k = int(idx[r])
             res = self._triangulate_views(uv, k, list(np.flatnonzero(blob[:, k] >= 0)))
-            if res.n_views[0] >= 2 and self._plausible(res.points)[0]:
+            if res.n_views[0] >= 2 and self.plausible(res.points)[0]:
                 X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
                 # on an end in every two-marker view: one marker, whatever its blobs' size says
                 placed[r] = all((int(c), int(blob[c, k])) in done for c in np.flatnonzero(two[:, r]))
@@ -429,7 +429,7 @@ class PointReconstructor:
                 key = (c, int(blob[c, k]))
                 sub[c] = ends(key)[free_end.pop(key)]
             res = self._triangulate_views(sub[:, None, :], 0, cs)
-            if res.n_views[0] >= 2 and self._plausible(res.points)[0]:
+            if res.n_views[0] >= 2 and self.plausible(res.points)[0]:
                 X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
                 uv[:, k] = sub
                 placed[r] = True
@@ -448,7 +448,7 @@ class PointReconstructor:
                 sub[c], col[c] = ends(key)[free_end[key]], key[1]
             res = self._triangulate_views(sub[:, None, :], 0, cs)
             Y = res.points[0]
-            if res.n_views[0] < 2 or not self._plausible(res.points)[0] or res.error[0] > cfg.epipolar_px:
+            if res.n_views[0] < 2 or not self.plausible(res.points)[0] or res.error[0] > cfg.epipolar_px:
                 continue
             others = np.vstack([X[idx]] + [n[0][None] for n in new])
             if np.min(np.linalg.norm(others - Y, axis=1)) < cfg.min_separation_m:
@@ -548,7 +548,7 @@ class PointReconstructor:
                 continue
             res = self._triangulate_views(uv, j, own)
             reflected = 2.0 * X[k] - res.points[0]
-            if res.n_views[0] < 2 or not self._plausible(reflected[None])[0]:
+            if res.n_views[0] < 2 or not self.plausible(reflected[None])[0]:
                 continue
             X[k] = reflected
             X[j], err[j] = res.points[0], res.error[0]
@@ -628,14 +628,16 @@ class PointReconstructor:
         blob in place. False when the rest does not make a point (fewer than 2 views left after the
         triangulator's outlier test, or outside the capture volume)."""
         res = self._triangulate_views(uv, k, [c for c in np.flatnonzero(blob[:, k] >= 0) if c not in drop])
-        if res.n_views[0] < 2 or not self._plausible(res.points)[0]:
+        if res.n_views[0] < 2 or not self.plausible(res.points)[0]:
             return False
         X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
         blob[drop, k] = -1
         blob[~res.used[:, 0], k] = -1
         return True
 
-    def _plausible(self, X: np.ndarray) -> np.ndarray:
+    def plausible(self, X: np.ndarray) -> np.ndarray:
+        """(N,) bool: points X (N, 3) m (NaN rows: False) inside the capture volume (``z_min``
+        to ``z_max`` high, within ``max_range_m`` of a camera)."""
         cfg = self.config
         fin = np.isfinite(X).all(axis=1)
         Xs = np.where(fin[:, None], X, 0.0)

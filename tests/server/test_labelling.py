@@ -1076,3 +1076,52 @@ def test_a_subject_climbing_up_a_structure_keeps_every_name_up_there(ceiling):
         assert right[-30:].mean() >= 0.9  # up by the top of the cameras' images
     else:
         assert not right[-30:].any()
+
+
+@pytest.mark.parametrize("rescue_m", [0.06, 0.0])
+def test_a_hand_in_front_of_a_shoulder_keeps_its_name_when_the_shoulder_takes_its_blob(rescue_m):
+    """The left hand moves in front of the right shoulder as cam0 sees it: the shoulder, hidden
+    behind the hand there, still projects onto the hand's blob, so its point (seen by the other
+    three cameras) takes that blob too. The hand, hidden from cam2 and cam3 by the body, is
+    left with cam1's blob alone: no point. Tracking names it from the two blobs near its
+    prediction (off, ``rescue_m`` 0: unnamed)."""
+    rig = default_rig(4)
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    LW, RS = 2, 1
+    c0 = rig.cameras[0].center
+    ray = (pose[RS] - c0) / np.linalg.norm(pose[RS] - c0)
+    target = pose[RS] - 0.25 * ray  # 25 cm in front of the shoulder on cam0's ray
+    frames = [pose.copy() for _ in range(30)]
+    for w in np.linspace(0.0, 1.0, 60)[1:]:  # 1 s to get there
+        m = pose.copy()
+        m[LW] = (1 - w) * pose[LW] + w * target
+        frames.append(m)
+    frames += [frames[-1]] * 20
+    lab = Labeller(rig, config=LabelConfig(rescue_m=rescue_m))
+    rng = np.random.default_rng(5)
+    got = []
+    for i, m in enumerate(frames):
+        packets = []
+        for c, cam in enumerate(rig.cameras):
+            seen = np.ones(8, bool)
+            if i >= 89:
+                seen[LW] = c in (0, 1)  # the body hides the hand from cam2 and cam3 ...
+                seen[RS] = c != 0  # ... and the hand the shoulder from cam0
+            uv = cam.project(m[seen]) + rng.normal(0, 0.1, (int(seen.sum()), 2))
+            packets.append(MarkerPacket(cam.name, 0, int(i / FPS * 1e9), 160, 120, 100,
+                                        np.full(len(uv), UNLABELLED, np.uint8), uv.astype(np.float32),
+                                        np.full(len(uv), 9, np.uint16), np.zeros(len(uv), np.uint8)))
+        got.append(lab.label(packets, i / FPS)[0])
+    got = np.array(got)
+    truth = np.array(frames)
+    # the setting is as described: the shoulder's point took the hand's blob in cam0
+    pts = lab.points.reconstruct(lab._views)
+    k = int(np.argmin(np.linalg.norm(pts.X - truth[-1, RS], axis=1)))
+    assert pts.n_views[k] == 4 and np.min(np.linalg.norm(pts.X - truth[-1, LW], axis=1)) > 0.1
+    assert _right(got[:89], truth[:89]).all()
+    hand = _right(got[89:], truth[89:])[:, LW]
+    if rescue_m > 0:
+        assert hand.all()
+        assert _right(got[89:], truth[89:]).all()
+    else:
+        assert not np.isfinite(got[89:, LW]).any()
