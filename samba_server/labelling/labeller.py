@@ -64,7 +64,8 @@ class LabelConfig:
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
     rescue_m: float = 0.06  #: a tracked marker with no point is triangulated from two views' blobs within this of its prediction (0: never) ...
-    rescue_px: float = 0.3  #: ... that meet within this (rms reprojection error, px)
+    rescue_px: float = 0.3  #: ... that meet within this (rms reprojection error, px) ...
+    rescue_max_s: float = 1.0  #: ... for at most this long after it was last named on a point
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
     wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
@@ -197,6 +198,8 @@ class Labeller:
         self._t_frame = self._t_prev = -np.inf  # this frame's and the previous frame's times
         self._free_hist: list[tuple[float, np.ndarray]] = []  # (t, free sure points (F, 3)) over the last second
         self._glue: tuple[list, list] = ([], [])  # per shoulder: (t, wrist-to-other-shoulder m, height difference m, wrist)
+        self._on_point = np.full(N_MARKERS, -np.inf)  # per marker: when it was last named on a point (not rescued)
+        self._rescued = np.zeros(N_MARKERS, bool)  # this frame's markers found by :meth:`_rescue`
 
     # ------------------------------------------------------------------ feedback from the server
     def observe(self, t: float, joints: np.ndarray) -> None:
@@ -265,6 +268,7 @@ class Labeller:
         self._steady = None
         self._reset_timers()
         self._free_hist = []
+        self._on_point[:] = -np.inf
 
     def _reset_timers(self) -> None:
         """Forget what the swap rules saw held over time: it was about the names before."""
@@ -289,6 +293,7 @@ class Labeller:
     def _label(self, packets: list, t: float) -> tuple[np.ndarray, LabelQuality]:
         self.stats.frames += 1
         self._t_prev, self._t_frame = self._t_frame, t
+        self._rescued[:] = False
         self._views = [view_blobs(p) for p in packets]
         pts = self.points.reconstruct(self._views)
         if len(pts) >= 2:
@@ -476,7 +481,8 @@ class Labeller:
         ``rescue_px`` (a marker's own two blobs meet within 0.25 px; a blob pair that only
         happens to lie near the prediction mostly does not), lies within ``rescue_m`` of the
         prediction and by that much nearer it than any other marker's, is no other point and lies
-        in the capture volume.
+        in the capture volume; for at most ``rescue_max_s`` after the marker was last named on a
+        point (rescues alone do not keep a track alive: one gone astray would live on ghosts).
         out (8, 3), assign (8,) (the point per marker, -1 none) from tracking; pred (8, 3). Fills
         out in place; returns how many markers it named. Three cameras or more: with two, a
         marker the points stage left without a point is mostly a ghost pair it rejected
@@ -484,7 +490,8 @@ class Labeller:
         cfg = self.config
         age = t - self._seen
         todo = [m for m in range(N_MARKERS) if assign[m] < 0 and not np.isfinite(out[m]).all()
-                and age[m] <= cfg.track_timeout and np.isfinite(pred[m]).all()]
+                and age[m] <= cfg.track_timeout and np.isfinite(pred[m]).all()
+                and t - self._on_point[m] <= cfg.rescue_max_s]
         C = len(self._views)
         if not todo or cfg.rescue_m <= 0 or C < 3:  # with two cameras every point is a 2-view point
             return 0
@@ -525,6 +532,7 @@ class Labeller:
                                   & self.points.plausible(res.points))
             if good.size:
                 out[m] = res.points[good[np.argmin(dp[good])]]
+                self._rescued[m] = True
                 found += 1
         return found
 
@@ -1114,6 +1122,8 @@ class Labeller:
             self._pos[:] = np.nan
             self._seen[:] = -np.inf
             self._vel[:] = 0.0
+            self._on_point[:] = -np.inf
+        self._on_point[named & ~self._rescued] = t
         for m in np.flatnonzero(named):
             dt = t - self._seen[m]
             if shared is not None and shared[m]:
