@@ -63,7 +63,7 @@ class LabelConfig:
     split_sigma_px: float = float("inf")  #: noise of the separation a merged blob's moments measure, to split two markers on one point by it (inf: off, the default: see docs/labelling.md; 0.5 on the simulator's blobs)
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
-    rescue_m: float = 0.06  #: a tracked marker with no point is triangulated from two views' blobs within this of its prediction (0: never) ...
+    rescue_m: float = 0.06  #: a tracked shoulder or wrist with no point is triangulated from two views' blobs within this of its prediction (0: never) ...
     rescue_px: float = 0.3  #: ... that meet within this (rms reprojection error, px) ...
     rescue_max_s: float = 1.0  #: ... for at most this long after it was last named on a point
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
@@ -486,10 +486,13 @@ class Labeller:
         out (8, 3), assign (8,) (the point per marker, -1 none) from tracking; pred (8, 3). Fills
         out in place; returns how many markers it named. Three cameras or more: with two, a
         marker the points stage left without a point is mostly a ghost pair it rejected
-        (swordplay lost 8 points)."""
+        (swordplay lost 8 points). Shoulders and wrists only (:data:`_RESCUED`): a knee or ankle
+        that goes unnamed for a frame is how the legs' swap rules get to see a swapped pair (a
+        dance's legs, named the other way round after a blackout, kept those names 0.8 s
+        longer when the left knee was rescued on the right knee's blobs)."""
         cfg = self.config
         age = t - self._seen
-        todo = [m for m in range(N_MARKERS) if assign[m] < 0 and not np.isfinite(out[m]).all()
+        todo = [m for m in _RESCUED if assign[m] < 0 and not np.isfinite(out[m]).all()
                 and age[m] <= cfg.track_timeout and np.isfinite(pred[m]).all()
                 and t - self._on_point[m] <= cfg.rescue_max_s]
         C = len(self._views)
@@ -1176,6 +1179,9 @@ def _guess_split(pred: np.ndarray, m: int, n: int, half: float, right: np.ndarra
         return None
     return off * min(1.0, half / norm)
 
+
+#: markers :meth:`Labeller._rescue` looks for in the blobs
+_RESCUED = (LS, RS, LW, RW)
 
 #: per side: (its shoulder, its wrist, the other shoulder)
 _ARMS = ((LS, LW, RS), (RS, RW, LS))
