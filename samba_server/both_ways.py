@@ -37,9 +37,9 @@ one tracked from the past, one from the future. The forward (live) naming stays,
 Otherwise a naming that neither pass corrected is not overruled by the other: the backward
 pass starts mid-motion at the end of the take, with no standard pose, and its first
 identification is often the weaker one (tried: preferring the pass that had tracked longer
-lost 17 points on a take whose backward identification named the legs the wrong way round). The chosen markers are
-then solved forwards by a new solver built as the live one and backwards by one for the
-subject it measured, the two merged per frame
+lost 17 points on a take whose backward identification named the legs the wrong way round).
+The chosen markers are then solved forwards by a new solver built as the live one and
+backwards by one for the subject it measured, the two merged per frame
 (:func:`~samba_server.recon.reconstruct.solve_both_ways`).
 
 The recording (``--record``) keeps the live, forward-only poses: ``samba-replay`` of it

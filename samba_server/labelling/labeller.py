@@ -491,12 +491,14 @@ class Labeller:
         dance's legs, named the other way round after a blackout, kept those names 0.8 s
         longer when the left knee was rescued on the right knee's blobs)."""
         cfg = self.config
+        C = len(self._views)
+        if cfg.rescue_m <= 0 or C < 3:
+            return 0
         age = t - self._seen
         todo = [m for m in _RESCUED if assign[m] < 0 and not np.isfinite(out[m]).all()
                 and age[m] <= cfg.track_timeout and np.isfinite(pred[m]).all()
                 and t - self._on_point[m] <= cfg.rescue_max_s]
-        C = len(self._views)
-        if not todo or cfg.rescue_m <= 0 or C < 3:  # with two cameras every point is a 2-view point
+        if not todo:
             return 0
         tri = self.points.tri
         proj, depth = tri.project(pred[todo])  # (C, M, 2) px, (C, M) m
@@ -521,17 +523,13 @@ class Labeller:
             res = tri.triangulate(uv)
             dp = np.linalg.norm(res.points - pred[m], axis=1)
             others = np.r_[pts.X, out[np.isfinite(out).all(axis=1)]]
-            apart = np.ones(len(combos), bool)
-            if len(others):
-                apart = np.min(np.linalg.norm(res.points[:, None] - others[None], axis=2), axis=1) \
-                    >= cfg.points.min_separation_m
-            # and nearer this marker's prediction than any other's (feet crossing: the other
-            # ankle's blobs, its point missing too, are not this one's)
+            # and nearer this marker's prediction than any other's (hands together: the other
+            # wrist's blobs, its point missing too, are not this one's)
             rival = np.delete(pred, m, axis=0)
             rival = rival[np.isfinite(rival).all(axis=1)]
-            if len(rival):
-                apart &= np.min(np.linalg.norm(res.points[:, None] - rival[None], axis=2), axis=1) >= dp + cfg.rescue_m
-            good = np.flatnonzero(np.isfinite(dp) & (dp <= cfg.rescue_m) & (res.error <= cfg.rescue_px) & apart
+            good = np.flatnonzero(np.isfinite(dp) & (dp <= cfg.rescue_m) & (res.error <= cfg.rescue_px)
+                                  & (_nearest(res.points, others) >= cfg.points.min_separation_m)
+                                  & (_nearest(res.points, rival) >= dp + cfg.rescue_m)
                                   & self.points.plausible(res.points))
             if good.size:
                 out[m] = res.points[good[np.argmin(dp[good])]]
@@ -589,7 +587,7 @@ class Labeller:
                 own, other = (LS, RS) if m == LW else (RS, LS)
                 ds = np.linalg.norm(X - named[own], axis=1)
                 do = np.linalg.norm(X - named[other], axis=1)
-                clear = np.min(np.linalg.norm(X[:, None] - np.delete(named, m, axis=0)[None], axis=2), axis=1)
+                clear = _nearest(X, np.delete(named, m, axis=0))
                 if moving is None:
                     moving = self._moving(X, self._t_frame)
                 anchor = np.where((ds <= body.reach + body.tol) & (clear >= cfg.wrist_clear_m) & moving,
@@ -979,7 +977,7 @@ class Labeller:
         for _ht, Y in old:
             if not len(Y):
                 return np.ones(len(X), bool)
-            static &= np.min(np.linalg.norm(X[:, None] - Y[None], axis=2), axis=1) <= 0.02
+            static &= _nearest(X, Y) <= 0.02
         return ~static
 
     def _split_shared(self, out: np.ndarray, assign: np.ndarray, pts: Points3D, pred: np.ndarray,
@@ -1178,6 +1176,13 @@ def _guess_split(pred: np.ndarray, m: int, n: int, half: float, right: np.ndarra
     if not np.isfinite(norm) or norm < 1e-9:
         return None
     return off * min(1.0, half / norm)
+
+
+def _nearest(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """(N,) distance (m) from each point of X (N, 3) to the nearest of Y (M, 3); inf when M = 0."""
+    if not len(Y):
+        return np.full(len(X), np.inf)
+    return np.min(np.linalg.norm(X[:, None] - Y[None], axis=2), axis=1)
 
 
 #: markers :meth:`Labeller._rescue` looks for in the blobs
