@@ -15,10 +15,11 @@ one tracked from the past, one from the future. The forward (live) naming stays,
 - where the forward pass itself found a marker's name wrong within ``window_s`` (1 s) after
   the frame (``LabelQuality.renamed``: a swap rule, an audit or a re-identification replaced
   it), the backward pass names that marker at the same point at the rename (tracking it, not
-  renaming it itself), and the backward pass did not find its own name for it wrong within
-  ``window_s`` before the frame (a backward rename the forward naming confirms likewise), the
-  frame takes the backward name, and the backward names of
-  the markers the forward pass left unnamed; every marker's when the two namings agree as a
+  renaming it itself; a rename that left the marker unnamed: where the forward pass names it
+  next, at most ``NEXT_S`` later), and the backward pass did not find its own name for it
+  wrong within ``window_s`` before the frame (a backward rename the forward naming confirms
+  likewise), the frame takes the backward name, and the backward names of the markers the
+  forward pass left unnamed; every marker's when the two namings agree as a
   whole at the rename. The names a pass corrects were wrong for a while before the
   correction; a rename the backward pass does not confirm may itself be the mistake. A mix
   that would name one point twice keeps the forward names;
@@ -69,6 +70,9 @@ __all__ = ["PassResult", "backward_pass", "choose", "relabel_both_ways"]
 COIN_M = 0.01
 #: ... and one by this much (the labelling's ``min_margin``: taken at once) was clear
 CLEAR_M = 0.06
+#: s: a rename that left a marker unnamed is checked where the forward pass names it next,
+#: at most this much later
+NEXT_S = 0.1
 
 
 @dataclass
@@ -151,6 +155,25 @@ def _lineage(identified: np.ndarray | None, named: np.ndarray, forward: bool) ->
     return out
 
 
+def _renamed_to_none(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike: np.ndarray,
+                     t: np.ndarray, within_s: float = NEXT_S) -> np.ndarray:
+    """(F, 8) bool: markers a forward rename left unnamed (the pass found the name wrong and
+    had no other point for it yet) that the backward pass names there, and that the forward
+    pass names again within ``within_s`` s, before any other rename of them, at the backward
+    pass's point. renamed: (F,) int bits; nf, nb: (F, 8) the forward, backward pass names the
+    marker; alike: (F, 8) both name it at the same point; t: (F,) s."""
+    out = np.zeros_like(nf)
+    bits = (renamed.astype(np.int64)[:, None] >> np.arange(N_MARKERS)) & 1 == 1
+    for k, m in zip(*np.nonzero(bits & ~nf & nb)):
+        for j in range(k + 1, len(t)):
+            if t[j] - t[k] > within_s or bits[j, m]:
+                break
+            if nf[j, m]:
+                out[k, m] = alike[j, m]
+                break
+    return out
+
+
 def _doubles(markers: np.ndarray) -> int:
     """Pairs of named markers (8, 3) within 1 cm of each other: one point named twice."""
     named = markers[np.isfinite(markers).all(axis=1)]
@@ -178,7 +201,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     # there (not renaming them itself), names at the same points; when it is confirmed for all
     # of them and the two namings agree as a whole (>= 4 markers named by both, none named
     # otherwise), for every marker
-    alike = marker_bits(nf & nb & close)  # (F,) bits: named at the same points by both
+    alike = marker_bits((nf & nb & close) | _renamed_to_none(fwd.renamed, nf, nb, nf & nb & close, t))
     agree = alike & ~bwd.renamed.astype(np.int64)
     renamed = fwd.renamed.astype(np.int64)
     whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)

@@ -13,6 +13,7 @@ from samba_common.calib import CalibrationError
 from samba_common.config import ConfigError
 from samba_common.formats import save_joints
 from samba_common.progress import Progress
+from samba_common.skeleton import MARKER_NAMES
 from samba_server.activity import MoteActivity
 from samba_server.app import add_placement_arg, build_server, load_server_configs, setup_logging
 from samba_server.process import VideoError, _open_video, process_videos
@@ -88,13 +89,36 @@ def main(argv: list[str] | None = None) -> int:
     note = getattr(server.reconstructor, "placement_note", None)
     if note:
         print(f"marker placement: {note}", file=sys.stderr)
-    for line in activity.warnings():
+    for line in activity.warnings() + unnamed_warnings(extra["markers"], joints):
         print(f"samba-process: WARNING: {line}", file=sys.stderr)
     if solved < 0.5 * len(t):
         print(f"samba-process: WARNING: only {solved} of {len(t)} frames solved: {failure_reason(server)}",
               file=sys.stderr)
         return 3
     return 0
+
+
+#: a marker unnamed in more than this share of the frames with a pose is reported
+UNNAMED_WARN = 0.1
+
+
+def unnamed_warnings(markers: np.ndarray, joints: np.ndarray, share: float = UNNAMED_WARN) -> list[str]:
+    """One line per marker left unnamed in more than ``share`` of the frames with a pose: its
+    limb there is the solver's guess (often tens of cm off), not a measurement. markers:
+    (F, 8, 3) named markers (NaN = unnamed); joints: (F, 13, 3) poses (NaN = none)."""
+    solved = np.isfinite(joints).all(axis=(1, 2))
+    n = int(solved.sum())
+    if n == 0:
+        return []
+    unnamed = ~np.isfinite(markers[solved]).all(axis=2)  # (n, 8)
+    out = []
+    for m in np.flatnonzero(unnamed.mean(axis=0) > share):
+        side, part = MARKER_NAMES[m].split("_")
+        limb = "arm" if part in ("shoulder", "wrist") else "leg"
+        k = int(unnamed[:, m].sum())
+        out.append(f"{side} {part} unnamed in {k} of {n} frames with a pose ({100 * k / n:.0f} %): the {side} "
+                   f"{limb} there is the solver's guess (n_markers in the output counts the named markers)")
+    return out
 
 
 def failure_reason(server) -> str:

@@ -9,7 +9,7 @@ from samba_common.calib import default_rig
 from samba_common.skeleton import MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
-from samba_server.both_ways import PassResult, choose, relabel_both_ways
+from samba_server.both_ways import NEXT_S, PassResult, choose, relabel_both_ways
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from samba_server.recon.reconstruct import Reconstructor
 from samba_server.server import Server, ServerConfig
@@ -169,3 +169,31 @@ def test_names_from_a_coin_flip_identification_give_way_to_a_clear_backward_nami
     b[200:, :5] = np.nan  # the backward pass names 3 markers there: those frames stay forward
     _m, from_b = choose(fwd, bwd, t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(131, 200))
+
+
+def test_a_rename_that_left_the_marker_unnamed_is_checked_where_it_is_named_next():
+    """The forward pass names the left wrist on the wrong point up to frame 200, then finds the
+    name wrong and, with no other point for it yet, leaves it unnamed (as a hand hidden beside
+    the other shoulder was, on a take of a new body); from frame 202 it names the wrist where
+    the backward pass does. The backward names are taken for the wrong stretch. A wrist named
+    again only after NEXT_S, or named where the backward pass does not, confirms nothing."""
+    F = 301
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    a = b.copy()
+    a[:200, LW] += 0.5  # wrong for the forward pass ...
+    a[200:202, LW] = np.nan  # ... unnamed when it found that out
+    ren_f = np.zeros(F, np.int64)
+    ren_f[200] = 1 << LW
+    markers, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, np.zeros(F, np.int64), np.zeros(F)), t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 200))
+    assert np.allclose(markers[140:200], b[140:200])
+    late = a.copy()
+    late[200:200 + int(NEXT_S * FPS) + 2, LW] = np.nan  # named again only after NEXT_S
+    _m, from_b = choose(PassResult(late, ren_f, np.zeros(F)), PassResult(b, np.zeros(F, np.int64), np.zeros(F)), t)
+    assert not from_b[:200].any()
+    elsewhere = a.copy()
+    elsewhere[202:, LW] += 0.2  # named again, but not where the backward pass names it
+    _m, from_b = choose(PassResult(elsewhere, ren_f, np.zeros(F)), PassResult(b, np.zeros(F, np.int64), np.zeros(F)), t)
+    assert not from_b[:200].any()

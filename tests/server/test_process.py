@@ -12,7 +12,7 @@ from samba_common.calib import default_rig
 from samba_common.formats import load_joints
 from samba_common.skeleton import MARKER_JOINT
 from samba_mote.sim.render import render_take
-from samba_server.cli.process import main
+from samba_server.cli.process import main, unnamed_warnings
 from samba_server.cli.replay import main as replay_main
 from samba_server.recon import reconstruct_take
 from samba_server.record import TakeReader
@@ -95,3 +95,22 @@ def test_process_bad_inputs(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
         main([str(calib)])
     assert exc.value.code == 2
+
+
+def test_a_limb_the_solver_guessed_in_many_frames_is_reported():
+    """A marker left unnamed in more than a tenth of the frames with a pose gets a warning
+    naming the limb the solver guessed; frames without a pose (a blackout) do not count, and a
+    marker hidden now and then (every take has some) is not reported."""
+    F = 100
+    joints = np.zeros((F, 13, 3))
+    markers = np.zeros((F, 8, 3))
+    joints[80:] = np.nan  # a blackout: no pose
+    markers[80:] = np.nan
+    markers[:5, 0] = np.nan  # left shoulder hidden in 5 of 80 posed frames: usual
+    assert unnamed_warnings(markers, joints) == []
+    markers[10:25, 2] = np.nan  # left wrist in 15 of 80
+    (line,) = unnamed_warnings(markers, joints)
+    assert line.startswith("left wrist unnamed in 15 of 80 frames with a pose (19 %)") and "left arm" in line
+    markers[:30, 7] = np.nan  # and the right ankle in 30
+    assert [w.split(" unnamed")[0] for w in unnamed_warnings(markers, joints)] == ["left wrist", "right ankle"]
+    assert "right leg" in unnamed_warnings(markers, joints)[1]
