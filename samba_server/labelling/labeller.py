@@ -767,15 +767,20 @@ class Labeller:
     def _swap_to_fit(self, out: np.ndarray, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
                      t: float) -> None:
         """The names are compared with the motion database (``pose_fit``) against each
-        confusion tracking can make (a wrist and its shoulder, the two wrists, knees, ankles or
-        legs, a knee and its ankle, a wrist and the other shoulder, the mirror image) of markers
-        named on points: a swap that brings the markers within ``fit_swap_ratio`` of their
+        confusion tracking can make (a wrist and its shoulder, the two wrists, knees or ankles, a
+        knee and its ankle, a wrist and the other shoulder, the mirror image) of markers named
+        on points: a swap that brings the markers within ``fit_swap_ratio`` of their
         distance to the nearest body, the same swap at every check (each ``fit_interval``) for
         ``fit_swap_s``, is made (names and tracks). Unnamed markers stand at their predictions
         pred (8, 3) for the comparison (none without one). A hand passing its shoulder can leave the two names the
         other way round, each a plausible distance from the other markers, so no rigid length
         tells; the pose they make (a shoulder in front of the chest, the arm folded through it)
-        is one no body in the database takes. out (8, 3), assign, arow (8,) in place."""
+        is one no body in the database takes. Not both legs at once: that swap keeps every shin
+        and every leg on its side within ``crossed_m``, so only the database would tell, and a
+        subject standing with crossed ankles (no database body does) fits it better swapped (a
+        dancer on another body, 005_13 seed 11, was so renamed in both passes: 1.7 s with both
+        legs' names wrong); the solver's verdict (:meth:`refit`) still tries it. out (8, 3),
+        assign, arow (8,) in place."""
         cfg = self.config
         if t - self._t_fit < cfg.fit_interval - 1e-6:
             return
@@ -784,7 +789,9 @@ class Labeller:
         if self.pose_fit is None or not math.isfinite(cfg.fit_swap_s) or not np.isfinite(base).all():
             self._fit_swap = None
             return
-        usable = np.flatnonzero(self._swappable(assign >= 0, t))
+        swappable = self._swappable(assign >= 0, t)
+        swappable[_LEGS] = False
+        usable = np.flatnonzero(swappable)
         dist0 = float(self.pose_fit(base[None])[0])
         best, holds = -1, False
         if usable.size and math.isfinite(dist0):
@@ -1225,6 +1232,7 @@ _FIT_SWAPS = _permutations((
     ((RK, RA),), ((LS, RW),), ((RS, LW),), ((LS, RS), (LW, RW), (LK, RK), (LA, RA))))
 _FIT_MOVES = _FIT_SWAPS != np.arange(N_MARKERS)
 _MIRROR = len(_FIT_SWAPS) - 1  #: the row of _FIT_SWAPS naming every marker for its other side
+_LEGS = 5  #: the row of _FIT_SWAPS naming each leg for the other (knee and ankle)
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
 
 
