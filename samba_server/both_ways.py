@@ -25,6 +25,10 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   that would name one point twice keeps the forward names;
 - where the forward pass names nothing and the backward names are not doubted so, the frame
   takes the backward names (the wait for a clear identification after a blackout);
+- where the forward pass leaves a marker unnamed (a hand hidden from a view, a point the
+  points stage did not make) and the backward pass, not doubting it, names it without a break
+  from an edge of that gap where both passes name it at the same point, the backward name
+  fills the gap: there both followed the same marker;
 - where the two namings differ, the forward names descend from a coin-flip identification
   (margin < ``COIN_M``; never the take's first, from the standard pose) and the backward ones
   from a clear one (>= ``CLEAR_M``), the frame takes the backward names if they name as many
@@ -174,6 +178,27 @@ def _renamed_to_none(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike:
     return out
 
 
+def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray) -> np.ndarray:
+    """(F, 8) bool: the frames of each gap in the forward pass's names of a marker (a hand
+    hidden from a view, a point the points stage did not make) that the backward pass names
+    without a break from an edge of the gap where both passes name the marker at the same
+    point: there both followed the same marker, so the backward name across the gap is its
+    continuation. nf, nb: (F, 8) the forward, backward pass names the marker; alike: (F, 8)
+    both name it at the same point."""
+    F = len(nf)
+    out = np.zeros_like(nf)
+    for m in range(nf.shape[1]):
+        gaps = np.flatnonzero(np.diff(np.r_[1, nf[:, m].astype(np.int8), 1]))  # starts, ends of the gaps
+        for a, b in zip(gaps[::2], gaps[1::2]):
+            if a > 0 and alike[a - 1, m]:
+                run = np.flatnonzero(~nb[a:b, m])
+                out[a:a + (run[0] if run.size else b - a), m] = True
+            if b < F and alike[b, m]:
+                run = np.flatnonzero(~nb[a:b, m][::-1])
+                out[b - (run[0] if run.size else b - a):b, m] = True
+    return out
+
+
 def _doubles(markers: np.ndarray) -> int:
     """Pairs of named markers (8, 3) within 1 cm of each other: one point named twice."""
     named = markers[np.isfinite(markers).all(axis=1)]
@@ -186,7 +211,9 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     doubted its own (a rename the backward naming confirms: the renamed markers, or every
     marker where the two namings agree as a whole at the rename) and the backward pass names
     it and did not doubt it (with the markers the forward pass left unnamed in that frame), and
-    every name of a frame the forward pass names nothing in (see the module docstring); and
+    every name of a frame the forward pass names nothing in (see the module docstring); the
+    backward names across a gap in the forward names of a marker that they continue
+    (:func:`_bridged`); and
     every name of a frame whose forward names descend from a coin-flip identification (margin
     < ``COIN_M``, not the take's first) while the backward ones descend from a clear one (>=
     ``CLEAR_M``) and name as many markers, or at least 4.
@@ -218,6 +245,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     lin_b = _lineage(bwd.identified, nb.any(axis=1), forward=False)
     flip = (lin_f < COIN_M) & (lin_b >= CLEAR_M) & (nb.sum(axis=1) >= np.minimum(nf.sum(axis=1), 4)) \
         & ~same.all(axis=1)
+    bridged = _bridged(nf, nb, nf & nb & close)
     markers = fwd.markers.copy()
     from_b = np.zeros(len(t), bool)
     for k in range(len(t)):
@@ -230,9 +258,11 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
             continue
         sure_b = nb[k] & ~bit_markers(doubt_b[k])  # backward names, not doubted
         take = bit_markers(doubt_f[k]) & sure_b & ~same[k]
+        if take.any():
+            take |= ~nf[k] & sure_b  # a naming found wrong in part: its gaps are filled in too
+        take |= bridged[k] & sure_b
         if not take.any():
             continue
-        take |= ~nf[k] & sure_b  # a naming found wrong in part: its gaps are filled in too
         mixed = markers[k].copy()
         mixed[take] = bwd.markers[k][take]
         if _doubles(mixed) <= _doubles(fwd.markers[k]):
