@@ -223,12 +223,14 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     nf = np.isfinite(fwd.markers).all(axis=2)
     nb = np.isfinite(bwd.markers).all(axis=2)
     close = np.linalg.norm(np.nan_to_num(fwd.markers - bwd.markers), axis=2) <= 0.01
-    same = (nf & nb & close) | (~nf & ~nb)  # (F, 8) the two passes name marker m alike
+    both = nf & nb & close  # (F, 8) named at the same point by both passes
+    same = both | (~nf & ~nb)  # (F, 8) the two passes name marker m alike
     # a rename is confirmed for the markers it renamed that the backward pass, tracking them
-    # there (not renaming them itself), names at the same points; when it is confirmed for all
-    # of them and the two namings agree as a whole (>= 4 markers named by both, none named
+    # there (not renaming them itself), names at the same points (a marker the rename left
+    # unnamed: where the forward pass names it next, within NEXT_S); when it is confirmed for
+    # all of them and the two namings agree as a whole (>= 4 markers named by both, none named
     # otherwise), for every marker
-    alike = marker_bits((nf & nb & close) | _renamed_to_none(fwd.renamed, nf, nb, nf & nb & close, t))
+    alike = marker_bits(both | _renamed_to_none(fwd.renamed, nf, nb, both, t))
     agree = alike & ~bwd.renamed.astype(np.int64)
     renamed = fwd.renamed.astype(np.int64)
     whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
@@ -245,7 +247,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     lin_b = _lineage(bwd.identified, nb.any(axis=1), forward=False)
     flip = (lin_f < COIN_M) & (lin_b >= CLEAR_M) & (nb.sum(axis=1) >= np.minimum(nf.sum(axis=1), 4)) \
         & ~same.all(axis=1)
-    bridged = _bridged(nf, nb, nf & nb & close)
+    bridged = _bridged(nf, nb, both)
     markers = fwd.markers.copy()
     from_b = np.zeros(len(t), bool)
     for k in range(len(t)):

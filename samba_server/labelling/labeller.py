@@ -1224,15 +1224,17 @@ def _permutations(swaps: tuple[tuple[tuple[int, int], ...], ...]) -> np.ndarray:
     return out
 
 
-#: the confusions :meth:`Labeller._swap_to_fit` checks, as (S, 8) marker orders: a wrist and
-#: its shoulder, the wrists, the knees, the ankles, the legs, a knee and its ankle, a wrist and
-#: the other shoulder, the mirror image; and (S, 8) the markers each one moves
-_FIT_SWAPS = _permutations((
+#: the confusions :meth:`Labeller.refit` and (but for both legs at once) :meth:`Labeller._swap_to_fit`
+#: check, as (S, 8) marker orders: a wrist and its shoulder, the wrists, the knees, the ankles,
+#: the legs, a knee and its ankle, a wrist and the other shoulder, the mirror image; and (S, 8)
+#: the markers each one moves
+_FIT_SWAP_PAIRS = (
     ((LS, LW),), ((RS, RW),), ((LW, RW),), ((LK, RK),), ((LA, RA),), ((LK, RK), (LA, RA)), ((LK, LA),),
-    ((RK, RA),), ((LS, RW),), ((RS, LW),), ((LS, RS), (LW, RW), (LK, RK), (LA, RA))))
+    ((RK, RA),), ((LS, RW),), ((RS, LW),), ((LS, RS), (LW, RW), (LK, RK), (LA, RA)))
+_FIT_SWAPS = _permutations(_FIT_SWAP_PAIRS)
 _FIT_MOVES = _FIT_SWAPS != np.arange(N_MARKERS)
 _MIRROR = len(_FIT_SWAPS) - 1  #: the row of _FIT_SWAPS naming every marker for its other side
-_LEGS = 5  #: the row of _FIT_SWAPS naming each leg for the other (knee and ankle)
+_LEGS = _FIT_SWAP_PAIRS.index(((LK, RK), (LA, RA)))  #: the row naming each leg for the other
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
 
 
