@@ -1086,9 +1086,10 @@ def test_a_hand_in_front_of_a_shoulder_keeps_its_name_when_the_shoulder_takes_it
     left with cam1's blob alone: no point. Tracking names it from the two blobs near its
     prediction (off, ``rescue_m`` 0: unnamed), for at most ``rescue_max_s`` (1 s) after it was
     last named on a point (held 1.5 s: named for 1 s, then not)."""
+    from samba_server.labelling.rigid import LW, RS
+
     rig = default_rig(4)
     pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
-    LW, RS = 2, 1
     c0 = rig.cameras[0].center
     ray = (pose[RS] - c0) / np.linalg.norm(pose[RS] - c0)
     target = pose[RS] - 0.25 * ray  # 25 cm in front of the shoulder on cam0's ray
