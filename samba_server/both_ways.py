@@ -13,7 +13,8 @@ subject the forward pass measured from its standard pose), so each frame has two
 one tracked from the past, one from the future. The forward (live) naming stays, except:
 
 - where the forward pass itself found a marker's name wrong within ``window_s`` (1 s) after
-  the frame (``LabelQuality.renamed``: a swap rule, an audit or a re-identification replaced
+  the frame, or later with the two passes naming it otherwise ever since (at most
+  ``APART_S``) (``LabelQuality.renamed``: a swap rule, an audit or a re-identification replaced
   it), the backward pass names that marker at the same point at the rename (tracking it, not
   renaming it itself; a rename that left the marker unnamed: where the forward pass names it
   next, at most ``NEXT_S`` later), and the backward pass did not find its own name for it
@@ -21,8 +22,14 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   likewise), the frame takes the backward name, and the backward names of the markers the
   forward pass left unnamed; every marker's when the two namings agree as a
   whole at the rename. The names a pass corrects were wrong for a while before the
-  correction; a rename the backward pass does not confirm may itself be the mistake. A mix
-  that would name one point twice keeps the forward names;
+  correction; a rename the backward pass does not confirm may itself be the mistake. Where
+  a kept forward name and a taken backward one fall on one point, neither stands (the two
+  passes dispute it); a mix that would still name one point twice keeps the forward names;
+- where a forward rename gave a marker another point while the backward pass, not doubting
+  it, names it at the point both passes named it through the ``AGREED_S`` before, the
+  backward name holds from the rename until the two name it alike again: the forward pass's
+  own past and the backward pass's future agree against the rule that renamed it (a
+  climber's legs swapped by a rule for 0.6 s on another body);
 - where the forward pass names nothing and the backward names are not doubted so, the frame
   takes the backward names (the wait for a clear identification after a blackout);
 - where the forward pass leaves a marker unnamed (a hand hidden from a view, a point the
@@ -77,6 +84,13 @@ CLEAR_M = 0.06
 #: s: a rename that left a marker unnamed is checked where the forward pass names it next,
 #: at most this much later
 NEXT_S = 0.1
+#: s: a forward rename is refuted only where both passes named the marker alike this long
+#: before it
+AGREED_S = 0.5
+#: s: a confirmed forward rename also doubts the names before it back to where the two passes
+#: last named the marker alike, at most this long (on the harness's takes 3 s and no bound
+#: gave the same)
+APART_S = 3.0
 
 
 @dataclass
@@ -140,6 +154,25 @@ def _doubted(renamed: np.ndarray, named: np.ndarray, t: np.ndarray, window_s: fl
     return out
 
 
+def _bits(renamed: np.ndarray) -> np.ndarray:
+    """(F, 8) bool: marker m's bit set in renamed (F,) int bits."""
+    return (renamed.astype(np.int64)[:, None] >> np.arange(N_MARKERS)) & 1 == 1
+
+
+def _apart_before(renamed: np.ndarray, same: np.ndarray, t: np.ndarray, max_s: float = APART_S) -> np.ndarray:
+    """(F,) int, bit m set on the frames before a rename of marker m (renamed: (F,) int bits)
+    back to where the two passes last named m alike (same: (F, 8) bool), at most max_s s
+    before it: the stretch the renamed name had been wrong, however long (a climber's wrist
+    named on the other shoulder's point for 1.9 s before a rule gave the point back)."""
+    out = np.zeros(len(t), np.int64)
+    for k, m in zip(*np.nonzero(_bits(renamed))):
+        j = k - 1
+        while j >= 0 and not same[j, m] and t[k] - t[j] <= max_s:
+            out[j] |= 1 << m
+            j -= 1
+    return out
+
+
 def _lineage(identified: np.ndarray | None, named: np.ndarray, forward: bool) -> np.ndarray:
     """(F,) the margin (m) of the identification each frame's names descend from in the pass's
     direction of travel (forward: the last one before or at the frame; backward: after or at
@@ -167,7 +200,7 @@ def _renamed_to_none(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike:
     pass's point. renamed: (F,) int bits; nf, nb: (F, 8) the forward, backward pass names the
     marker; alike: (F, 8) both name it at the same point; t: (F,) s."""
     out = np.zeros_like(nf)
-    bits = (renamed.astype(np.int64)[:, None] >> np.arange(N_MARKERS)) & 1 == 1
+    bits = _bits(renamed)
     for k, m in zip(*np.nonzero(bits & ~nf & nb)):
         for j in range(k + 1, len(t)):
             if t[j] - t[k] > within_s or bits[j, m]:
@@ -199,6 +232,41 @@ def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray) -> np.ndarray:
     return out
 
 
+def _refuted(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike: np.ndarray, t: np.ndarray,
+             agreed_s: float = AGREED_S) -> np.ndarray:
+    """(F, 8) bool: the frames from a forward rename on, until the two passes name the
+    marker alike again (or the forward pass renames it again), of each marker the rename gave
+    another point to where the backward pass, reaching the rename tracking, names it at the
+    point both passes named it in every frame of the ``agreed_s`` s before: the forward
+    pass's own past and the backward pass's future agree against the rule that renamed it.
+    Not after a shorter agreement: right after a blackout both passes can name a subject the
+    same wrong way (two cameras, a dancer's legs named the mirror way round by the forward
+    identification and the backward tracking alike), and the rename mends that. renamed: (F,)
+    int bits; nf, nb: (F, 8) the forward, backward pass names the marker; alike: (F, 8) both
+    name it at the same point; t: (F,) s."""
+    F = len(nf)
+    out = np.zeros_like(nf)
+    bits = _bits(renamed)
+    for k, m in zip(*np.nonzero(bits)):
+        before = np.flatnonzero(t[:k] >= t[k] - agreed_s)
+        if t[0] > t[k] - agreed_s or not alike[before, m].all() or alike[k, m] or not (nf[k, m] and nb[k, m]):
+            continue
+        j = k
+        while j < F and nb[j, m] and not alike[j, m] and not (j > k and bits[j, m]):
+            j += 1
+        out[k:j, m] = True
+    return out
+
+
+def _disputed(mixed: np.ndarray, take: np.ndarray) -> np.ndarray:
+    """(8,) bool: the markers of a mixed naming mixed (8, 3) (take (8,) bool: the names
+    taken from the backward pass) on a point within 1 cm of a marker of the other pass: the
+    two passes name that point as different markers, so neither name stands."""
+    d = np.linalg.norm(mixed[:, None] - mixed[None], axis=2)
+    near = np.nan_to_num(d, nan=np.inf) <= 0.01
+    return (near & (take[:, None] != take[None])).any(axis=1)
+
+
 def _doubles(markers: np.ndarray) -> int:
     """Pairs of named markers (8, 3) within 1 cm of each other: one point named twice."""
     named = markers[np.isfinite(markers).all(axis=1)]
@@ -216,10 +284,12 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     (:func:`_bridged`); and
     every name of a frame whose forward names descend from a coin-flip identification (margin
     < ``COIN_M``, not the take's first) while the backward ones descend from a clear one (>=
-    ``CLEAR_M``) and name as many markers, or at least 4.
-    A frame whose mixed names would name one point twice more often than the forward names
-    keeps the forward ones. Returns ((F, 8, 3) markers, (F,) bool: a name taken from the
-    backward pass)."""
+    ``CLEAR_M``) and name as many markers, or at least 4; the backward names from a forward
+    rename on that both passes refute (:func:`_refuted`). A forward name kept on a point
+    whose backward name is taken for another marker, and that backward name, are dropped
+    (:func:`_disputed`); a frame whose mixed names would still name one point twice more
+    often than the forward names keeps the forward ones. Returns ((F, 8, 3) markers, (F,)
+    bool: a name taken from the backward pass)."""
     nf = np.isfinite(fwd.markers).all(axis=2)
     nb = np.isfinite(bwd.markers).all(axis=2)
     close = np.linalg.norm(np.nan_to_num(fwd.markers - bwd.markers), axis=2) <= 0.01
@@ -235,7 +305,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     renamed = fwd.renamed.astype(np.int64)
     whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
     confirmed = np.where(whole & (renamed != 0), marker_bits(np.ones(N_MARKERS, bool)), renamed & agree)
-    doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True)
+    doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True) | _apart_before(confirmed, same, t)
     # and the other way round: a backward rename counts where the forward pass names those
     # markers at the same points (tracking them, not renaming them)
     agree_b = alike & ~renamed
@@ -248,6 +318,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     flip = (lin_f < COIN_M) & (lin_b >= CLEAR_M) & (nb.sum(axis=1) >= np.minimum(nf.sum(axis=1), 4)) \
         & ~same.all(axis=1)
     bridged = _bridged(nf, nb, both)
+    refuted = _refuted(fwd.renamed, nf, nb, both, t)
     markers = fwd.markers.copy()
     from_b = np.zeros(len(t), bool)
     for k in range(len(t)):
@@ -262,11 +333,12 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         take = bit_markers(doubt_f[k]) & sure_b & ~same[k]
         if take.any():
             take |= ~nf[k] & sure_b  # a naming found wrong in part: its gaps are filled in too
-        take |= bridged[k] & sure_b
+        take |= (bridged[k] | refuted[k]) & sure_b
         if not take.any():
             continue
         mixed = markers[k].copy()
         mixed[take] = bwd.markers[k][take]
+        mixed[_disputed(mixed, take)] = np.nan
         if _doubles(mixed) <= _doubles(fwd.markers[k]):
             markers[k], from_b[k] = mixed, True
     return markers, from_b

@@ -27,12 +27,13 @@ from __future__ import annotations
 import itertools
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from samba_common.body import ANKLE_HEIGHT
 from samba_common.calib import CameraRig
 from samba_common.skeleton import MARKER_JOINT, N_MARKERS
 
@@ -1069,7 +1070,7 @@ class Labeller:
         cfg = self.config
         if len(pts) < cfg.min_points:
             return None
-        hyps = identify(pts.X, self._trust(pts), self._body, self._hint(t), shared=pts.merged_all)
+        hyps = identify(pts.X, self._trust(pts), self._raised(pts), self._hint(t), shared=pts.merged_all)
         if not hyps:
             self._t_ambiguous = self._steady = None
             return None
@@ -1101,6 +1102,21 @@ class Labeller:
         log.info("t=%.3f s: markers identified from %d points (%d named, margin %.2f)", t, len(pts),
                  int(named.sum()), margin)
         return out, LabelQuality(int(named.sum()), len(pts), 0.1 * margin, 0.0, "identified", 0)
+
+    def _raised(self, pts: Points3D) -> Body:
+        """The body for identifying afresh: its shoulders' ceiling raised by the height of the
+        lowest sure point (>= 3 views) above an ankle standing on the floor, when there are
+        more sure points than the legs' four. A subject standing on a structure when the labels
+        were lost (a climbing frame after a blackout) has its shoulders above the ceiling of
+        one standing on the floor, and the knees were named as shoulders. Not with the legs
+        alone in view (the upper body above the cameras): the knees, a shoulder width apart,
+        would be. Only here: the audit, able to name shoulders up there, took a wrist passing
+        at shoulder height for a shoulder."""
+        sure = pts.X[pts.n_views >= 3, 2]
+        if sure.size <= len(SIDES) * 2:  # a knee and an ankle per side
+            return self._body
+        lift = float(sure.min()) - ANKLE_HEIGHT
+        return replace(self._body, top=self._body.top + lift) if lift > 0 else self._body
 
     def _steady_since(self, pts: Points3D, best, t: float) -> float:
         """Since when (s) an unclear identification's best labelling has named the same markers

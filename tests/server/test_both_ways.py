@@ -9,7 +9,7 @@ from samba_common.calib import default_rig
 from samba_common.skeleton import MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
-from samba_server.both_ways import NEXT_S, PassResult, choose, relabel_both_ways
+from samba_server.both_ways import AGREED_S, APART_S, NEXT_S, PassResult, choose, relabel_both_ways
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from samba_server.recon.reconstruct import Reconstructor
 from samba_server.server import Server, ServerConfig
@@ -89,7 +89,7 @@ def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
     t = np.arange(F) / FPS
     a = np.zeros((F, 8, 3))
     b = a.copy()
-    b[:200] += 0.5
+    b[140:200] += 0.5  # the passes agree up to frame 139 (a rename doubts back to there)
     ren_f, ren_b = np.zeros(F, np.int64), np.zeros(F, np.int64)
     fwd, bwd = PassResult(a, ren_f, np.zeros(F)), PassResult(b, ren_b, np.zeros(F))
     markers, from_b = choose(fwd, bwd, t)
@@ -114,7 +114,7 @@ def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
     b[200:] -= 0.5
     b[200:, [LW, RW]] += 0.3  # the namings agree on all but the wrists at the rename ...
     ren_f[200] = (1 << LA) | (1 << RA)  # ... that swapped the ankles only: only they are taken
-    b[:200, [LA, RA]] = b[:200, [RA, LA]] + [[0.0, 0.0, 0.1], [0.0, 0.0, 0.2]]
+    b[140:200, [LA, RA]] = b[140:200, [RA, LA]] + [[0.0, 0.0, 0.1], [0.0, 0.0, 0.2]]
     b[150, LA] = np.nan  # a name the backward pass does not give is not taken away
     markers, from_b = choose(fwd, bwd, t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 200))
@@ -182,7 +182,7 @@ def test_a_rename_that_left_the_marker_unnamed_is_checked_where_it_is_named_next
     b = np.zeros((F, 8, 3))
     b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
     a = b.copy()
-    a[:200, LW] += 0.5  # wrong for the forward pass ...
+    a[140:200, LW] += 0.5  # wrong for the forward pass ...
     a[200:202, LW] = np.nan  # ... unnamed when it found that out
     ren_f = np.zeros(F, np.int64)
     ren_f[200] = 1 << LW
@@ -223,3 +223,89 @@ def test_a_gap_in_the_forward_names_is_filled_where_the_backward_pass_names_the_
     other[50, LW] = np.nan
     markers, from_b = choose(PassResult(a, none, np.zeros(F)), PassResult(other, none, np.zeros(F)), t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(40, 50)) and np.allclose(markers[40:50], b[40:50])
+
+
+def test_a_forward_rename_both_passes_refute_is_undone_until_they_agree_again():
+    """Both passes name the legs alike up to frame 49; at frame 50 a rule of the forward pass
+    swaps the two legs' names (as on a climb of another body), and the backward pass, tracking
+    from the end of the take, names them as both did before. The forward pass's own past and
+    the backward pass's future agree against that rule: the backward names are taken from the
+    rename until the forward pass names the legs as the backward one again (frame 80). A
+    backward pass that itself renamed the legs shortly before the rename, in its direction of
+    travel, refutes nothing; nor does one that named them otherwise before the rename, or alike
+    for less than AGREED_S (right after a blackout both passes can be wrong the same way)."""
+    F = 120
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    a = b.copy()
+    legs = [LK, LA, RK, RA]
+    a[50:80, legs] = b[50:80][:, [RK, RA, LK, LA]]  # the forward pass swaps the legs at frame 50
+    ren_f = np.zeros(F, np.int64)
+    ren_f[50] = sum(1 << m for m in legs)
+    none = np.zeros(F, np.int64)
+    markers, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(50, 80)) and np.allclose(markers, b)
+    ren_b = np.zeros(F, np.int64)
+    ren_b[40] = ren_f[50]  # the backward pass doubted its own names there
+    _m, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, ren_b, np.zeros(F)), t)
+    assert not from_b.any()
+    other = b.copy()
+    other[:50, legs] += 0.3  # the passes did not name the legs alike before the rename
+    _m, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(other, none, np.zeros(F)), t)
+    assert not from_b.any()
+    seen = 50 - int(AGREED_S * FPS) // 2  # a blackout up to here: both name the legs alike for
+    other[:seen] = np.nan  # half AGREED_S before the rename (after a blackout both can be wrong alike)
+    other[seen:50] = b[seen:50]
+    blind = a.copy()
+    blind[:seen] = np.nan
+    _m, from_b = choose(PassResult(blind, ren_f, np.zeros(F)), PassResult(other, none, np.zeros(F)), t)
+    assert not from_b[seen:].any()
+
+
+def test_a_point_the_two_passes_name_as_different_markers_is_named_neither_way():
+    """Up to frame 200 the forward pass names the left wrist elsewhere and the right wrist on the
+    left wrist's point; at 200 it finds the left wrist's name wrong and renames it to the point
+    the backward pass names it at. In the second before, the backward left wrist is taken, on
+    the point the forward right wrist still holds: the passes dispute that point, so neither
+    name stands there (the mix used to be refused whole, keeping both wrong forward names)."""
+    F = 301
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    a = b.copy()
+    a[140:200, LW] += 0.5
+    a[140:200, RW] = b[140:200, LW]
+    b[200:, LA] += 0.3  # the namings do not agree as a whole at the rename: the left wrist is taken alone
+    ren_f = np.zeros(F, np.int64)
+    ren_f[200] = 1 << LW
+    none = np.zeros(F, np.int64)
+    markers, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 200))
+    assert np.isnan(markers[140:200, [LW, RW]]).all()
+    others = [LS, RS, LK, RK, LA, RA]
+    assert np.allclose(markers[140:200, others], a[140:200, others]) and np.allclose(markers[:140], a[:140])
+
+
+def test_a_confirmed_rename_doubts_the_names_back_to_where_the_passes_last_agreed():
+    """The forward pass names the left wrist on the right shoulder's point from frame 40 (a
+    climber's hand at the other shoulder) and gives the point back at frame 170, 2.2 s later;
+    the backward pass names it right throughout. The whole stretch back to frame 40, where the
+    passes last agreed, takes the backward name, not only the second before the rename; a
+    stretch longer than APART_S only its last APART_S."""
+    F = 400
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    a = b.copy()
+    a[40:170, LW] = b[40:170, RS] + [0.0, 0.0, 0.2]  # near the shoulder, not on it
+    ren_f = np.zeros(F, np.int64)
+    ren_f[170] = 1 << LW
+    none = np.zeros(F, np.int64)
+    markers, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(40, 170)) and np.allclose(markers, b)
+    long = b.copy()
+    long[:350, LW] += 0.2  # wrong from the start, renamed at 350
+    ren_f[170], ren_f[350] = 0, 1 << LW
+    _m, from_b = choose(PassResult(long, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(350 - int(APART_S * FPS), 350))
