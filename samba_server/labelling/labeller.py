@@ -1106,17 +1106,26 @@ class Labeller:
     def _raised(self, pts: Points3D) -> Body:
         """The body for identifying afresh: its shoulders' ceiling raised by the height of the
         lowest sure point (>= 3 views) above an ankle standing on the floor, when there are
-        more sure points than the legs' four. A subject standing on a structure when the labels
-        were lost (a climbing frame after a blackout) has its shoulders above the ceiling of
-        one standing on the floor, and the knees were named as shoulders. Not with the legs
-        alone in view (the upper body above the cameras): the knees, a shoulder width apart,
-        would be. Only here: the audit, able to name shoulders up there, took a wrist passing
-        at shoulder height for a shoulder."""
-        sure = pts.X[pts.n_views >= 3, 2]
-        if sure.size <= len(SIDES) * 2:  # a knee and an ankle per side
+        more sure points than the legs' four and one of them is a shin above that point,
+        upright (rise >= ``_UPRIGHT`` of its length): a subject standing up there. A subject
+        standing on a structure when the labels were lost (a climbing frame after a blackout)
+        has its shoulders above the ceiling of one standing on the floor, and the knees were
+        named as shoulders. Not with the legs alone in view (the upper body above the
+        cameras): the knees, a shoulder width apart, would be; nor for a climber hanging from a
+        bar, knees pulled up, whose wrists overhead were named as shoulders. Only here: the
+        audit, able to name shoulders up there, took a wrist passing at shoulder height for a
+        shoulder."""
+        sure = pts.X[pts.n_views >= 3]
+        if len(sure) <= len(SIDES) * 2:  # a knee and an ankle per side
             return self._body
-        lift = float(sure.min()) - ANKLE_HEIGHT
-        return replace(self._body, top=self._body.top + lift) if lift > 0 else self._body
+        body = self._body
+        foot = sure[np.argmin(sure[:, 2])]
+        rise = sure[:, 2] - foot[2]
+        shin = np.abs(np.linalg.norm(sure - foot, axis=1) - body.shin) <= body.tol
+        if not (shin & (rise >= _UPRIGHT * body.shin)).any():  # no knee above that foot: not standing
+            return body
+        lift = float(foot[2]) - ANKLE_HEIGHT
+        return replace(body, top=body.top + lift) if lift > 0 else body
 
     def _steady_since(self, pts: Points3D, best, t: float) -> float:
         """Since when (s) an unclear identification's best labelling has named the same markers
@@ -1227,6 +1236,8 @@ def bit_markers(bits: int) -> np.ndarray:
     return (int(bits) >> np.arange(N_MARKERS)) & 1 == 1
 
 
+#: a shin at least this steep (rise over length) stands on its foot
+_UPRIGHT = 0.8
 #: LabelQuality.renamed with every marker's bit set
 _ALL = marker_bits(np.ones(N_MARKERS, bool))
 

@@ -16,7 +16,7 @@ from samba_server.labelling import Labeller
 from samba_server.labelling.labeller import LabelConfig
 from samba_server.labelling.blobs import view_blobs
 from samba_server.labelling.points import PointReconstructor, Points3D
-from samba_server.labelling.rigid import LS, RS
+from samba_server.labelling.rigid import LS, LW, RS, RW
 from samba_server.triangulate import Triangulator
 
 FPS = 60.0
@@ -767,6 +767,28 @@ def test_a_subject_standing_on_a_structure_after_a_blackout_is_identified_up_the
     right = _right(named, high[None])
     assert right[-10:].all(), named[-1] - high
     assert not (np.isfinite(named).all(axis=2) & ~right).any()  # never a wrong name
+
+
+def test_a_climber_hanging_from_a_bar_is_not_named_with_the_wrists_as_shoulders():
+    """A climber hangs from a bar after a blackout: the wrists overhead, level, about a
+    shoulder width apart, the knees pulled up to the shoulders, the feet 1.7 m up. The lowest
+    point is a foot, but the shin above it lies almost flat: nobody stands there, so the
+    shoulders' ceiling is not raised, and the wrists (2.3 m up, above the ceiling of a subject
+    on the floor) are not named as shoulders with the shoulders as knees (two climbs of other
+    bodies: 0.9 s named so, "clearly")."""
+    rig = default_rig(4)
+    hw, shin = 0.18, float(DEFAULT_LENGTHS[7])
+    hang = np.array([[-hw, 0.0, 1.8], [hw, 0.0, 1.8],  # shoulders (left on -x: facing +y)
+                     [-0.2, 0.0, 2.33], [0.2, 0.0, 2.33],  # wrists on the bar
+                     [-0.1, 0.35, 1.95], [0.1, 0.35, 1.95],  # knees pulled up in front
+                     [-0.1, 0.35 - np.sqrt(shin ** 2 - 0.2 ** 2), 1.75],
+                     [0.1, 0.35 - np.sqrt(shin ** 2 - 0.2 ** 2), 1.75]])  # feet tucked under
+    labeller = Labeller(rig)
+    labeller.set_lengths(DEFAULT_LENGTHS)
+    assert hang[[LW, RW], 2].min() > labeller._body.top  # the wrists are out of a floor subject's reach
+    named = _run(labeller, rig, np.repeat(hang[None], 30, axis=0), np.random.default_rng(5))
+    on_wrists = np.linalg.norm(named[:, [LS, RS], None] - hang[None, None, [LW, RW]], axis=3) < 0.05
+    assert not on_wrists.any()
 
 
 def _three_cameras():
