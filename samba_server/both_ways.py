@@ -154,18 +154,13 @@ def _doubted(renamed: np.ndarray, named: np.ndarray, t: np.ndarray, window_s: fl
     return out
 
 
-def _bits(renamed: np.ndarray) -> np.ndarray:
-    """(F, 8) bool: marker m's bit set in renamed (F,) int bits."""
-    return (renamed.astype(np.int64)[:, None] >> np.arange(N_MARKERS)) & 1 == 1
-
-
 def _apart_before(renamed: np.ndarray, same: np.ndarray, t: np.ndarray, max_s: float = APART_S) -> np.ndarray:
     """(F,) int, bit m set on the frames before a rename of marker m (renamed: (F,) int bits)
     back to where the two passes last named m alike (same: (F, 8) bool), at most max_s s
     before it: the stretch the renamed name had been wrong, however long (a climber's wrist
     named on the other shoulder's point for 1.9 s before a rule gave the point back)."""
     out = np.zeros(len(t), np.int64)
-    for k, m in zip(*np.nonzero(_bits(renamed))):
+    for k, m in zip(*np.nonzero(bit_markers(renamed))):
         j = k - 1
         while j >= 0 and not same[j, m] and t[k] - t[j] <= max_s:
             out[j] |= 1 << m
@@ -200,7 +195,7 @@ def _renamed_to_none(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike:
     pass's point. renamed: (F,) int bits; nf, nb: (F, 8) the forward, backward pass names the
     marker; alike: (F, 8) both name it at the same point; t: (F,) s."""
     out = np.zeros_like(nf)
-    bits = _bits(renamed)
+    bits = bit_markers(renamed)
     for k, m in zip(*np.nonzero(bits & ~nf & nb)):
         for j in range(k + 1, len(t)):
             if t[j] - t[k] > within_s or bits[j, m]:
@@ -246,7 +241,7 @@ def _refuted(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike: np.ndar
     name it at the same point; t: (F,) s."""
     F = len(nf)
     out = np.zeros_like(nf)
-    bits = _bits(renamed)
+    bits = bit_markers(renamed)
     for k, m in zip(*np.nonzero(bits)):
         before = np.flatnonzero(t[:k] >= t[k] - agreed_s)
         if t[0] > t[k] - agreed_s or not alike[before, m].all() or alike[k, m] or not (nf[k, m] and nb[k, m]):
@@ -258,20 +253,23 @@ def _refuted(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike: np.ndar
     return out
 
 
+def _on_one_point(markers: np.ndarray) -> np.ndarray:
+    """(8, 8) bool: pairs of named markers (8, 3) (NaN = unnamed) within 1 cm of each other
+    (the diagonal is True for the named ones)."""
+    d = np.linalg.norm(markers[:, None] - markers[None], axis=2)
+    return np.nan_to_num(d, nan=np.inf) <= 0.01
+
+
 def _disputed(mixed: np.ndarray, take: np.ndarray) -> np.ndarray:
     """(8,) bool: the markers of a mixed naming mixed (8, 3) (take (8,) bool: the names
     taken from the backward pass) on a point within 1 cm of a marker of the other pass: the
     two passes name that point as different markers, so neither name stands."""
-    d = np.linalg.norm(mixed[:, None] - mixed[None], axis=2)
-    near = np.nan_to_num(d, nan=np.inf) <= 0.01
-    return (near & (take[:, None] != take[None])).any(axis=1)
+    return (_on_one_point(mixed) & (take[:, None] != take[None])).any(axis=1)
 
 
 def _doubles(markers: np.ndarray) -> int:
     """Pairs of named markers (8, 3) within 1 cm of each other: one point named twice."""
-    named = markers[np.isfinite(markers).all(axis=1)]
-    d = np.linalg.norm(named[:, None] - named[None], axis=2)
-    return int(np.count_nonzero(np.triu(d <= 0.01, 1)))
+    return int(np.count_nonzero(np.triu(_on_one_point(markers), 1)))
 
 
 def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:

@@ -1231,9 +1231,10 @@ def marker_bits(named: np.ndarray) -> int | np.ndarray:
     return int(bits) if np.ndim(bits) == 0 else bits
 
 
-def bit_markers(bits: int) -> np.ndarray:
-    """(8,) bool: the markers whose bit is set (inverse of :func:`marker_bits`)."""
-    return (int(bits) >> np.arange(N_MARKERS)) & 1 == 1
+def bit_markers(bits: int | np.ndarray) -> np.ndarray:
+    """The markers whose bit is set (inverse of :func:`marker_bits`): (8,) bool for an int,
+    (F, 8) for an (F,) int array."""
+    return (np.asarray(bits, np.int64)[..., None] >> np.arange(N_MARKERS)) & 1 == 1
 
 
 #: a shin at least this steep (rise over length) stands on its foot
