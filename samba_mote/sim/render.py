@@ -204,7 +204,18 @@ def render_camera(camera: Camera, joints: np.ndarray, cfg: SimConfig, seed: int 
     frames = np.empty((len(joints), h, w), np.uint8)
     for f in range(len(joints)):
         frames[f] = render_frame(camera.size, uv[f], radius[f], vis[f], distractors, cfg, rng)
-    return RenderedCamera(camera.name, frames, uv, radius, vis)
+    return RenderedCamera(camera.name, frames, uv, radius, vis & ~in_glare(uv, radius, distractors.lamps))
+
+
+def in_glare(uv: np.ndarray, radius: np.ndarray, lamps: np.ndarray, gap_px: float = 1.0) -> np.ndarray:
+    """(F, 8) bool: markers drawn on or against a lamp, whose blob is the lamp's (no camera
+    sees them: the truth calls them hidden). uv (F, 8, 2) px; radius (F, 8) px; lamps (K, 3)
+    rows (u, v, radius px)."""
+    out = np.zeros(uv.shape[:2], bool)
+    for u, v, rad in lamps:
+        d = np.hypot(uv[..., 0] - u, uv[..., 1] - v)
+        out |= d <= rad + radius + gap_px
+    return out
 
 
 def render_take(joints: np.ndarray, t: np.ndarray, rig: CameraRig, config: SimConfig | None = None,

@@ -445,7 +445,7 @@ class Labeller:
         self._swap_for_shins(out, assign, arow, right)
         self._swap_arms(out, assign, arow, t)
         # rigid distances and facing: drop the worse-predicted marker of a violating group
-        for group in self._body.violations(out):
+        for group in self._body.violations(out, narrowing=True):
             worst = max(group, key=lambda m: d[arow[m], m])
             out[worst] = np.nan
             assign[worst] = arow[worst] = -1

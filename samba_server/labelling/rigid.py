@@ -27,6 +27,12 @@ LEVEL_M = 0.06
 #: tolerance (jumps in the CMU clips lift them up to 0.50 m; a subject sitting or standing on a
 #: climbing frame, 0.77-0.94 m, keeps the names tracking gave, but is not identified up there)
 RISE_M = 0.6
+#: the shoulders come closer than their standing width with both arms overhead (to 0.79 of it
+#: in the CMU climbs and dances, wrists 0.3-0.5 m above their shoulders; below 0.9 of it never
+#: otherwise), never much wider (1.06): with both wrists named ARMS_UP_M above their shoulders,
+#: tracked names keep the shoulders down to NARROW of the width (plus the tolerance)
+NARROW = 0.85
+ARMS_UP_M = 0.25
 _B = {n: i for i, n in enumerate(BONE_TYPES)}
 #: an adult of average build (m), BONE_TYPES order, for before the subject is measured
 DEFAULT_LENGTHS = np.array([0.34, 0.20, 0.50, 0.25, 0.28, 0.26, 0.44, 0.43])
@@ -70,17 +76,27 @@ class Body:
     def width_error(self, left: np.ndarray, right: np.ndarray) -> float:
         return abs(float(np.linalg.norm(left - right)) - self.shoulder_width)
 
+    def narrowed_error(self, left: np.ndarray, right: np.ndarray) -> float:
+        """How far (m) the shoulder distance is outside [NARROW * width, width]."""
+        d = float(np.linalg.norm(left - right))
+        return max(d - self.shoulder_width, NARROW * self.shoulder_width - d, 0.0)
+
     def shin_misfit(self, markers: np.ndarray) -> float:
         """Sum over the legs with knee and ankle named in markers (8, 3) (NaN = unnamed) of how
         far (m) their distance is from the shin."""
         seen = np.isfinite(markers).all(axis=1)
         return sum(self.shin_error(markers[k], markers[a]) for _s, _w, k, a in SIDES if seen[k] and seen[a])
 
-    def violations(self, markers: np.ndarray) -> list[tuple[int, ...]]:
-        """Groups of labelled markers (8, 3) (NaN = unlabelled) that break a rigid distance."""
+    def violations(self, markers: np.ndarray, narrowing: bool = False) -> list[tuple[int, ...]]:
+        """Groups of labelled markers (8, 3) (NaN = unlabelled) that break a rigid distance.
+        narrowing: with both arms overhead the shoulders may come closer than their width, to
+        NARROW of it (for names tracked from the last frame; new names are held to the width)."""
         seen = np.isfinite(markers).all(axis=1)
         out: list[tuple[int, ...]] = []
-        if seen[LS] and seen[RS] and self.width_error(markers[LS], markers[RS]) > self.tol:
+        arms_up = seen[[LS, RS, LW, RW]].all() and \
+            min(markers[LW, 2] - markers[LS, 2], markers[RW, 2] - markers[RS, 2]) >= ARMS_UP_M
+        width = self.narrowed_error if narrowing and arms_up else self.width_error
+        if seen[LS] and seen[RS] and width(markers[LS], markers[RS]) > self.tol:
             out.append((LS, RS))
         for s, w, k, a in SIDES:
             if seen[k] and seen[a] and self.shin_error(markers[k], markers[a]) > self.tol:

@@ -323,3 +323,24 @@ def test_codec_without_encoder_is_a_clear_error(tmp_path, monkeypatch, capsys) -
         make_take(tmp_path / "a", None, rig=2, seconds=0.1, config=SimConfig(codec="h264"))
     assert sim_main([str(tmp_path / "b"), "--codec", "h264", "--seconds", "0.1", "--cameras", "2"]) == 1
     assert "samba-sim: cannot write h264 video" in capsys.readouterr().err
+
+
+def test_a_marker_in_front_of_a_lamp_is_hidden_in_the_truth():
+    """A marker drawn on the large lamp near the top of an image is part of the lamp's blob (no
+    camera could see it): the 2D truth calls it hidden there, and visible when it moves off."""
+    from samba_mote.sim.render import make_distractors, render_camera
+
+    cam = default_rig(4).cameras[0]
+    cfg = SimConfig(occlusion=False)
+    u, v, _r = make_distractors(cam.size, cfg, np.random.default_rng(7)).lamps[0]  # render_camera's first draw
+    ray = cam.R.T @ np.r_[cam.undistort_normalized(np.array([[u, v]]))[0], 1.0]
+    on_lamp = cam.center + 4.0 * ray / np.linalg.norm(ray)
+    pose = tpose(DEFAULT_LENGTHS)
+    joints = np.repeat(pose[None], 2, axis=0)
+    joints[0, J["left_wrist"]] = on_lamp
+    joints[1, J["left_wrist"]] = on_lamp + np.array([0.0, 0.0, -1.0])  # well below the lamp
+    rendered = render_camera(cam, joints, cfg, seed=7)
+    m = list(MARKER_JOINT).index(J["left_wrist"])
+    assert np.hypot(*(rendered.uv[0, m] - (u, v))) < 0.5
+    assert not rendered.visible[0, m]
+    assert rendered.visible[1, m]

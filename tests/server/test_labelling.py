@@ -1218,3 +1218,31 @@ def test_legs_tracked_into_crossed_ankles_are_not_renamed_for_the_database(legs_
         assert held.mean() < 0.2
     else:
         assert held.all() and right[80:].all()
+
+
+@pytest.mark.parametrize("narrow", [0.85, 1.0])
+def test_shoulders_drawn_in_with_both_arms_overhead_keep_their_names(narrow, monkeypatch):
+    """Arms raised overhead draw the shoulders in (a climb: to 0.79 of their standing width):
+    the tracked shoulder names stay while both wrists are up. Held to the standing width
+    (narrow=1.0, as before), the closer shoulder pair broke it and a shoulder went unnamed
+    for the whole time the arms were up."""
+    from samba_server.labelling import rigid
+
+    monkeypatch.setattr(rigid, "NARROW", narrow)
+    rig = default_rig(4)
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    mid = 0.5 * (pose[LS] + pose[RS])
+    up = pose.copy()
+    up[[LS, RS]] = mid + 0.76 * (pose[[LS, RS]] - mid)  # drawn in
+    up[[LW, RW]] = up[[LS, RS]] + np.array([0.0, 0.0, 0.45])  # straight up
+    n = 240
+    w = np.clip((np.arange(n) - 60) / 60, 0.0, 1.0)[:, None, None]
+    truth = (1 - w) * pose[None] + w * up[None]
+    lab = Labeller(rig)
+    lab.set_lengths(DEFAULT_LENGTHS)  # measured from the standard pose
+    right = _right(_run(lab, rig, truth, np.random.default_rng(5)), truth)
+    assert right[:60].all()
+    if narrow < 1.0:
+        assert right[120:].all()
+    else:
+        assert not right[120:, [LS, RS]].all(axis=1).any()
