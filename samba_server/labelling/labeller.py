@@ -582,16 +582,18 @@ class Labeller:
             if m in (LW, RW) and lost.size == 1:
                 # the one marker unnamed, a wrist: anywhere within its arm's reach, if nearer
                 # its own shoulder than the other one (else at a cost), clear of the named
-                # markers (a point hugging one is more likely its ghost) and not a static
-                # reflection: a wrist lost where its prediction went wrong (hands together on a
-                # sword hilt) is found again
+                # markers (a point hugging one is more likely its ghost), not a static
+                # reflection, and not a doubtful 2-view point that shares a blob with a named
+                # marker (a ghost made of other markers' blobs): a wrist lost where its
+                # prediction went wrong (hands together on a sword hilt) is found again
                 own, other = (LS, RS) if m == LW else (RS, LS)
                 ds = np.linalg.norm(X - named[own], axis=1)
                 do = np.linalg.norm(X - named[other], axis=1)
                 clear = _nearest(X, np.delete(named, m, axis=0))
                 if moving is None:
                     moving = self._moving(X, self._t_frame)
-                anchor = np.where((ds <= body.reach + body.tol) & (clear >= cfg.wrist_clear_m) & moving,
+                anchor = np.where((ds <= body.reach + body.tol) & (clear >= cfg.wrist_clear_m) & moving
+                                  & ((doubt == 0) | ~_shares_blob(pts, free, assign[assign >= 0])),
                                   cfg.wrist_side_w * np.maximum(0.0, ds - do), np.inf)
             for knee, ankle in ((LK, LA), (RK, RA)):
                 if m == ankle and assign[knee] >= 0:
@@ -1208,6 +1210,14 @@ def _guess_split(pred: np.ndarray, m: int, n: int, half: float, right: np.ndarra
     if not np.isfinite(norm) or norm < 1e-9:
         return None
     return off * min(1.0, half / norm)
+
+
+def _shares_blob(pts: Points3D, points: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """(N,) bool: each of ``points`` (N,) indices uses, in some view, a blob one of ``others``
+    (M,) point indices uses too (a merged blob holding both)."""
+    mine = pts.blob[:, points][:, :, None]  # (C, N, 1)
+    theirs = pts.blob[:, others][:, None, :]  # (C, 1, M)
+    return ((mine == theirs) & (mine >= 0)).any(axis=(0, 2))
 
 
 def _nearest(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
