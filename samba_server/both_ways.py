@@ -45,6 +45,11 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   from a clear identification at the end of the take. (Tried: the clearer identification
   winning wherever the two differ, by 0.1 m: -1.0 point on the benchmark, whose backward
   passes often go wrong after a clear identification.)
+- where the forward pass names a wrist on the point the backward pass names as a shoulder the
+  forward pass leaves unnamed, that shoulder takes its backward name and the wrist is unnamed:
+  a hand at the other shoulder takes the shoulder's point (the two markers on one 3D point)
+  and the shoulder goes unnamed; a shoulder is seldom hidden from every view for long, a hand
+  often is (a dribble on another body: a left wrist on the right shoulder's point for 0.5 s).
 
 Otherwise a naming that neither pass corrected is not overruled by the other: the backward
 pass starts mid-motion at the end of the take, with no standard pose, and its first
@@ -68,6 +73,7 @@ import numpy as np
 from samba_common.skeleton import N_MARKERS
 
 from .labelling import bit_markers, marker_bits
+from .labelling.rigid import LS, LW, RS, RW
 from .recon.reconstruct import solve_both_ways
 from .server import Server, ServerConfig
 
@@ -267,6 +273,19 @@ def _disputed(mixed: np.ndarray, take: np.ndarray) -> np.ndarray:
     return (_on_one_point(mixed) & (take[:, None] != take[None])).any(axis=1)
 
 
+def _wrist_on_shoulder(fwd: np.ndarray, bwd: np.ndarray) -> list[tuple[int, int, np.ndarray]]:
+    """(wrist, shoulder, (F,) bool) for each wrist and shoulder: the frames where the forward
+    names fwd (F, 8, 3) put the wrist within 1 cm of the backward names bwd's (F, 8, 3)
+    shoulder and leave that shoulder unnamed."""
+    return [(w, s, _within(fwd[:, w], bwd[:, s]) & ~np.isfinite(fwd[:, s]).all(axis=1))
+            for w in (LW, RW) for s in (LS, RS)]
+
+
+def _within(a: np.ndarray, b: np.ndarray, tol: float = 0.01) -> np.ndarray:
+    """(F,) bool: points a (F, 3) and b (F, 3), both named (finite), within tol (m)."""
+    return np.linalg.norm(np.nan_to_num(a - b, nan=1.0), axis=1) <= tol
+
+
 def _doubles(markers: np.ndarray) -> int:
     """Pairs of named markers (8, 3) within 1 cm of each other: one point named twice."""
     return int(np.count_nonzero(np.triu(_on_one_point(markers), 1)))
@@ -283,7 +302,9 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     every name of a frame whose forward names descend from a coin-flip identification (margin
     < ``COIN_M``, not the take's first) while the backward ones descend from a clear one (>=
     ``CLEAR_M``) and name as many markers, or at least 4; the backward names from a forward
-    rename on that both passes refute (:func:`_refuted`). A forward name kept on a point
+    rename on that both passes refute (:func:`_refuted`); a shoulder the forward pass left
+    unnamed where it names a wrist on that shoulder's backward point (:func:`_wrist_on_shoulder`;
+    the wrist unnamed there), also where a mix left it unnamed. A forward name kept on a point
     whose backward name is taken for another marker, and that backward name, are dropped
     (:func:`_disputed`); a frame whose mixed names would still name one point twice more
     often than the forward names keeps the forward ones. Returns ((F, 8, 3) markers, (F,)
@@ -339,6 +360,11 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         mixed[_disputed(mixed, take)] = np.nan
         if _doubles(mixed) <= _doubles(fwd.markers[k]):
             markers[k], from_b[k] = mixed, True
+    for w, s, hit in _wrist_on_shoulder(fwd.markers, bwd.markers):
+        hit &= ~np.isfinite(markers[:, s]).all(axis=1)  # still unnamed (or disputed in a mix)
+        markers[hit, s] = bwd.markers[hit, s]
+        markers[hit & _within(markers[:, w], bwd.markers[:, s]), w] = np.nan
+        from_b |= hit
     return markers, from_b
 
 

@@ -309,3 +309,26 @@ def test_a_confirmed_rename_doubts_the_names_back_to_where_the_passes_last_agree
     ren_f[170], ren_f[350] = 0, 1 << LW
     _m, from_b = choose(PassResult(long, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(350 - int(APART_S * FPS), 350))
+
+
+def test_a_wrist_on_the_point_the_backward_pass_names_its_unnamed_shoulder_gives_it_back():
+    """A hand at the other shoulder (a dribble): from frame 100 to 130 the forward pass names
+    the left wrist on the right shoulder's point and leaves the right shoulder unnamed, with no
+    rename; the backward pass names the right shoulder there and the left wrist elsewhere. The
+    shoulder takes its backward name and the wrist, which both passes cannot place, is unnamed.
+    Where the forward pass names the shoulder too (two markers on one point), nothing changes."""
+    F = 240
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    a = b.copy()
+    a[100:130, LW] = b[100:130, RS]
+    a[100:130, RS] = np.nan
+    a[160:180, LW] = b[160:180, RS]  # both on one point, the shoulder named: left alone
+    none = np.zeros(F, np.int64)
+    markers, from_b = choose(PassResult(a, none, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(100, 130))
+    assert np.allclose(markers[100:130, RS], b[100:130, RS]) and np.isnan(markers[100:130, LW]).all()
+    others = [m for m in range(8) if m not in (RS, LW)]
+    assert np.allclose(markers[100:130, others], a[100:130, others])
+    assert np.allclose(markers[:100], a[:100]) and np.allclose(markers[130:], a[130:])
