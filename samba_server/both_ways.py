@@ -42,7 +42,9 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   markers, or at least 4. After a blackout the forward pass may identify a subject whose mirror
   image scores the same (swordplay on another body was named all left for right for the last
   3.3 s of the take) and no rule renames it; the backward pass reached those frames tracking
-  from a clear identification at the end of the take. (Tried: the clearer identification
+  from a clear identification at the end of the take. Frames after the two passes agreed as
+  a whole no longer descend from the coin flip (it was settled; a later difference is a slip
+  of one pass). (Tried: the clearer identification
   winning wherever the two differ, by 0.1 m: -1.0 point on the benchmark, whose backward
   passes often go wrong after a clear identification.)
 - where the forward pass names a wrist on the point the backward pass names as a shoulder the
@@ -174,11 +176,13 @@ def _apart_before(renamed: np.ndarray, same: np.ndarray, t: np.ndarray, max_s: f
     return out
 
 
-def _lineage(identified: np.ndarray | None, named: np.ndarray, forward: bool) -> np.ndarray:
+def _lineage(identified: np.ndarray | None, named: np.ndarray, forward: bool,
+             settled: np.ndarray | None = None) -> np.ndarray:
     """(F,) the margin (m) of the identification each frame's names descend from in the pass's
     direction of travel (forward: the last one before or at the frame; backward: after or at
-    it), NaN where the pass named nothing since (or none is known). identified: (F,) margins
-    of the identification frames, NaN elsewhere; named: (F,) bool."""
+    it), NaN where the pass named nothing since, or a settled frame (not an identification's)
+    came since (or none is known). identified: (F,) margins of the identification frames, NaN
+    elsewhere; named, settled: (F,) bool."""
     F = len(named)
     out = np.full(F, np.nan)
     if identified is None:
@@ -189,6 +193,8 @@ def _lineage(identified: np.ndarray | None, named: np.ndarray, forward: bool) ->
             cur = np.nan
         elif np.isfinite(identified[k]):
             cur = float(identified[k])
+        elif settled is not None and settled[k]:
+            cur = np.nan
         out[k] = cur
     return out
 
@@ -332,7 +338,9 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     ident_f = fwd.identified.copy() if fwd.identified is not None else None
     if ident_f is not None and np.isfinite(ident_f).any():
         ident_f[np.flatnonzero(np.isfinite(ident_f))[0]] = np.inf  # the standard pose's: no coin flip
-    lin_f = _lineage(ident_f, nf.any(axis=1), forward=True)
+    # the two passes agreeing as a whole settle a coin flip: later frames do not descend from it
+    settled = ((nf & nb).sum(axis=1) >= 4) & same.all(axis=1)
+    lin_f = _lineage(ident_f, nf.any(axis=1), forward=True, settled=settled)
     lin_b = _lineage(bwd.identified, nb.any(axis=1), forward=False)
     flip = (lin_f < COIN_M) & (lin_b >= CLEAR_M) & (nb.sum(axis=1) >= np.minimum(nf.sum(axis=1), 4)) \
         & ~same.all(axis=1)

@@ -332,3 +332,30 @@ def test_a_wrist_on_the_point_the_backward_pass_names_its_unnamed_shoulder_gives
     others = [m for m in range(8) if m not in (RS, LW)]
     assert np.allclose(markers[100:130, others], a[100:130, others])
     assert np.allclose(markers[:100], a[:100]) and np.allclose(markers[130:], a[130:])
+
+
+def test_a_coin_flip_settled_by_the_two_passes_agreeing_no_longer_gives_way():
+    """The forward pass identifies the subject after a blackout with a margin of 0 but names it
+    right: the two passes agree as a whole from frame 131 to 200. From frame 250 the backward
+    pass, tracking from a clear identification at the end, holds a wrist and a knee the other
+    way round (a hand at the knee). The forward names stay there: the coin flip was settled
+    when the two passes agreed, and what differs later is a slip of the backward pass's own.
+    Where the passes never agreed after the coin flip, the backward names win (as above)."""
+    from samba_server.both_ways import CLEAR_M
+
+    F = 301
+    t = np.arange(F) / FPS
+    right = np.arange(8 * 3, dtype=float).reshape(8, 3) / 10.0
+    a = np.repeat(right[None], F, axis=0)
+    b = a.copy()
+    b[250:, [RW, LK]] = right[[LK, RW]]
+    a[100:130] = b[100:130] = np.nan
+    idf, idb = np.full(F, np.nan), np.full(F, np.nan)
+    idf[0], idf[130], idb[300] = 0.0, 0.0, CLEAR_M
+    fwd = PassResult(a, np.zeros(F, np.int64), np.zeros(F), idf)
+    bwd = PassResult(b, np.zeros(F, np.int64), np.zeros(F), idb)
+    markers, from_b = choose(fwd, bwd, t)
+    assert not from_b.any() and np.allclose(markers[131:], right)
+    b[131:250, :, 2] += 0.05  # the passes never agree after the coin flip: the backward names win
+    markers, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(131, F))
