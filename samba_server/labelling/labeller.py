@@ -583,8 +583,8 @@ class Labeller:
                 # the one marker unnamed, a wrist: anywhere within its arm's reach, if nearer
                 # its own shoulder than the other one (else at a cost), clear of the named
                 # markers (a point hugging one is more likely its ghost), not a static
-                # reflection, and not a doubtful 2-view point that shares a blob with a named
-                # marker (a ghost made of other markers' blobs): a wrist lost where its
+                # reflection, and not a doubtful 2-view point whose every blob a named marker
+                # uses too (a ghost where two merged blobs' rays cross): a wrist lost where its
                 # prediction went wrong (hands together on a sword hilt) is found again
                 own, other = (LS, RS) if m == LW else (RS, LS)
                 ds = np.linalg.norm(X - named[own], axis=1)
@@ -593,7 +593,7 @@ class Labeller:
                 if moving is None:
                     moving = self._moving(X, self._t_frame)
                 anchor = np.where((ds <= body.reach + body.tol) & (clear >= cfg.wrist_clear_m) & moving
-                                  & ((doubt == 0) | ~_shares_blob(pts, free, assign[assign >= 0])),
+                                  & ((doubt == 0) | ~_borrowed(pts, free, assign[assign >= 0])),
                                   cfg.wrist_side_w * np.maximum(0.0, ds - do), np.inf)
             for knee, ankle in ((LK, LA), (RK, RA)):
                 if m == ankle and assign[knee] >= 0:
@@ -1212,12 +1212,13 @@ def _guess_split(pred: np.ndarray, m: int, n: int, half: float, right: np.ndarra
     return off * min(1.0, half / norm)
 
 
-def _shares_blob(pts: Points3D, points: np.ndarray, others: np.ndarray) -> np.ndarray:
-    """(N,) bool: each of ``points`` (N,) indices uses, in some view, a blob one of ``others``
-    (M,) point indices uses too (a merged blob holding both)."""
-    mine = pts.blob[:, points][:, :, None]  # (C, N, 1)
-    theirs = pts.blob[:, others][:, None, :]  # (C, 1, M)
-    return ((mine == theirs) & (mine >= 0)).any(axis=(0, 2))
+def _borrowed(pts: Points3D, points: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """(N,) bool: each of ``points`` (N,) point indices uses, in every view it is seen in, a
+    (merged) blob one of ``others`` (M,) point indices uses too: it has no blob of its own.
+    (A ghost built where two named markers' merged blobs cross.)"""
+    mine = pts.blob[:, points]  # (C, N)
+    shared = ((mine[:, :, None] == pts.blob[:, others][:, None, :]) & (mine >= 0)[:, :, None]).any(axis=2)
+    return ((mine < 0) | shared).all(axis=0) & (mine >= 0).any(axis=0)
 
 
 def _nearest(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
