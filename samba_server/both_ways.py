@@ -265,11 +265,16 @@ def _refuted(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike: np.ndar
     return out
 
 
+def _within(a: np.ndarray, b: np.ndarray, tol: float = 0.01) -> np.ndarray:
+    """(...) bool: points a (..., 3) and b (..., 3) (broadcast; NaN = unnamed), both named,
+    within tol (m) of each other."""
+    return np.linalg.norm(np.nan_to_num(a - b, nan=1.0), axis=-1) <= tol
+
+
 def _on_one_point(markers: np.ndarray) -> np.ndarray:
     """(8, 8) bool: pairs of named markers (8, 3) (NaN = unnamed) within 1 cm of each other
     (the diagonal is True for the named ones)."""
-    d = np.linalg.norm(markers[:, None] - markers[None], axis=2)
-    return np.nan_to_num(d, nan=np.inf) <= 0.01
+    return _within(markers[:, None], markers[None])
 
 
 def _disputed(mixed: np.ndarray, take: np.ndarray) -> np.ndarray:
@@ -285,11 +290,6 @@ def _wrist_on_shoulder(fwd: np.ndarray, bwd: np.ndarray) -> list[tuple[int, int,
     shoulder and leave that shoulder unnamed."""
     return [(w, s, _within(fwd[:, w], bwd[:, s]) & ~np.isfinite(fwd[:, s]).all(axis=1))
             for w in (LW, RW) for s in (LS, RS)]
-
-
-def _within(a: np.ndarray, b: np.ndarray, tol: float = 0.01) -> np.ndarray:
-    """(F,) bool: points a (F, 3) and b (F, 3), both named (finite), within tol (m)."""
-    return np.linalg.norm(np.nan_to_num(a - b, nan=1.0), axis=1) <= tol
 
 
 def _doubles(markers: np.ndarray) -> int:
@@ -317,8 +317,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     bool: a name taken from the backward pass)."""
     nf = np.isfinite(fwd.markers).all(axis=2)
     nb = np.isfinite(bwd.markers).all(axis=2)
-    close = np.linalg.norm(np.nan_to_num(fwd.markers - bwd.markers), axis=2) <= 0.01
-    both = nf & nb & close  # (F, 8) named at the same point by both passes
+    both = _within(fwd.markers, bwd.markers)  # (F, 8) named at the same point by both passes
     same = both | (~nf & ~nb)  # (F, 8) the two passes name marker m alike
     # a rename is confirmed for the markers it renamed that the backward pass, tracking them
     # there (not renaming them itself), names at the same points (a marker the rename left
