@@ -44,7 +44,10 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   3.3 s of the take) and no rule renames it; the backward pass reached those frames tracking
   from a clear identification at the end of the take. Frames after the two passes agreed as
   a whole no longer descend from the coin flip (it was settled; a later difference is a slip
-  of one pass). (Tried: the clearer identification
+  of one pass); frames after an identification that renamed neither shoulder while the pass
+  held names (an audit moving a wrist, which counts agreeing with the tracked names as
+  evidence) still do (swordplay on another body kept the mirror names for the last 0.4 s after
+  such an audit). (Tried: the clearer identification
   winning wherever the two differ, by 0.1 m: -1.0 point on the benchmark, whose backward
   passes often go wrong after a clear identification.)
 - where the forward pass names a wrist on the point the backward pass names as a shoulder the
@@ -177,22 +180,27 @@ def _apart_before(renamed: np.ndarray, same: np.ndarray, t: np.ndarray, max_s: f
 
 
 def _lineage(identified: np.ndarray | None, named: np.ndarray, forward: bool,
-             settled: np.ndarray | None = None) -> np.ndarray:
+             settled: np.ndarray | None = None, renamed: np.ndarray | None = None) -> np.ndarray:
     """(F,) the margin (m) of the identification each frame's names descend from in the pass's
     direction of travel (forward: the last one before or at the frame; backward: after or at
     it), NaN where the pass named nothing since, or a settled frame (not an identification's)
-    came since (or none is known). identified: (F,) margins of the identification frames, NaN
-    elsewhere; named, settled: (F,) bool."""
+    came since (or none is known). An identification that renamed neither shoulder while the
+    pass held names (an audit that moved a wrist: it counts agreeing with the tracked names as
+    evidence, so its margin says nothing about the facing) does not start a lineage: the frames
+    after it descend from the less clear of it and the one before. identified: (F,) margins of
+    the identification frames, NaN elsewhere; named, settled: (F,) bool; renamed: (F,) int
+    bits (``LabelQuality.renamed``)."""
     F = len(named)
     out = np.full(F, np.nan)
     if identified is None:
         return out
+    kept = np.zeros(F, bool) if renamed is None else (bit_markers(renamed)[:, [LS, RS]] == 0).all(axis=1)
     cur = np.nan
     for k in (range(F) if forward else range(F - 1, -1, -1)):
         if not named[k]:
             cur = np.nan
         elif np.isfinite(identified[k]):
-            cur = float(identified[k])
+            cur = min(cur, float(identified[k])) if kept[k] and np.isfinite(cur) else float(identified[k])
         elif settled is not None and settled[k]:
             cur = np.nan
         out[k] = cur
@@ -339,8 +347,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         ident_f[np.flatnonzero(np.isfinite(ident_f))[0]] = np.inf  # the standard pose's: no coin flip
     # the two passes agreeing as a whole settle a coin flip: later frames do not descend from it
     settled = ((nf & nb).sum(axis=1) >= 4) & same.all(axis=1)
-    lin_f = _lineage(ident_f, nf.any(axis=1), forward=True, settled=settled)
-    lin_b = _lineage(bwd.identified, nb.any(axis=1), forward=False)
+    lin_f = _lineage(ident_f, nf.any(axis=1), forward=True, settled=settled, renamed=fwd.renamed)
+    lin_b = _lineage(bwd.identified, nb.any(axis=1), forward=False, renamed=bwd.renamed)
     flip = (lin_f < COIN_M) & (lin_b >= CLEAR_M) & (nb.sum(axis=1) >= np.minimum(nf.sum(axis=1), 4)) \
         & ~same.all(axis=1)
     bridged = _bridged(nf, nb, both)

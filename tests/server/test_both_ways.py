@@ -359,3 +359,33 @@ def test_a_coin_flip_settled_by_the_two_passes_agreeing_no_longer_gives_way():
     b[131:250, :, 2] += 0.05  # the passes never agree after the coin flip: the backward names win
     markers, from_b = choose(fwd, bwd, t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(131, F))
+
+
+def test_an_audit_that_kept_the_shoulders_does_not_settle_a_coin_flip():
+    """After a blackout the forward pass names the subject the mirror way round (a coin-flip
+    identification, margin 0); at frame 200 an audit, which counts agreeing with the tracked
+    names as evidence, moves only the right wrist, with a clear margin. The frames after it
+    still descend from the coin flip (swordplay on another body: the last 0.4 s of the take
+    kept the mirror names): the backward names, from a clear identification, win to the end.
+    An identification at 200 that renamed the shoulders starts a clear lineage of its own."""
+    from samba_server.both_ways import CLEAR_M
+
+    F = 301
+    t = np.arange(F) / FPS
+    right = np.arange(8 * 3, dtype=float).reshape(8, 3) / 10.0
+    a = np.repeat(right[None], F, axis=0)
+    a[131:] = right[MIRROR]
+    b = np.repeat(right[None], F, axis=0)
+    a[100:130] = b[100:130] = np.nan
+    a[200:, RW] += 0.05  # the audit gave the right wrist another point
+    idf, idb = np.full(F, np.nan), np.full(F, np.nan)
+    idf[0], idf[130], idf[200], idb[300] = 0.0, 0.0, CLEAR_M + 0.002, CLEAR_M
+    ren_f = np.zeros(F, np.int64)
+    ren_f[200] = 1 << RW
+    fwd = PassResult(a, ren_f, np.zeros(F), idf)
+    bwd = PassResult(b, np.zeros(F, np.int64), np.zeros(F), idb)
+    markers, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(131, F)) and np.allclose(markers[131:], right)
+    ren_f[200] = (1 << RW) | (1 << LS) | (1 << RS)  # a fresh look that renamed the shoulders
+    _m, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(131, 200))
