@@ -281,7 +281,8 @@ class Server:
     def label_packets(self, packets: list, t: float) -> tuple[np.ndarray, int, LabelQuality]:
         """:meth:`markers_for` on packets: per camera (rig order) a MarkerPacket or None."""
         if self.reconstructor is not None:
-            self.labeller.set_lengths(getattr(self.reconstructor, "lengths", None))
+            self.labeller.set_lengths(getattr(self.reconstructor, "lengths", None),
+                                      getattr(self.reconstructor, "offsets", None))
         pts, quality = self.labeller.label(packets, t)
         mask = marker_bits(np.isfinite(pts).all(axis=1))
         return pts, mask, quality

@@ -78,6 +78,8 @@ class LabelConfig:
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
     knees_crossed_s: float = 1.0  #: knees crossed (by crossed_m) this long are the legs' names swapped (inf: never)
     arm_swap_s: float = 0.05  #: a shoulder off the shoulder width whose own wrist's point fits it this long swaps with that wrist (inf: never)
+    reach_swap_m: float = 0.02  #: the wrists swap names when one is this far beyond its arm's reach from its shoulder ... (inf: never)
+    reach_fit_m: float = 0.03  #: ... and swapped both are this far within it
     shin_swap_min: float = 0.5  #: a leg pair is swapped when that mends a broken shin and the other shin is broken by at least this share of the tolerance (inf: never) ...
     shin_mend_max: float = 0.5  #: ... or when one shin is broken and the swap fits both within this share of it (0: never)
     fit_swap_ratio: float = 0.6  #: names swapped when that brings the 8 markers this much nearer (ratio) a database pose ...
@@ -250,14 +252,17 @@ class Labeller:
         self.stats.refits += 1
         return out
 
-    def set_lengths(self, lengths: np.ndarray | None) -> None:
-        """The subject's bone lengths (8,) (BONE_TYPES order) once measured; None keeps the default body."""
+    def set_lengths(self, lengths: np.ndarray | None, offsets: np.ndarray | None = None) -> None:
+        """The subject's bone lengths (8,) (BONE_TYPES order) once measured, and its markers'
+        offsets (8, 3) m from their joint centres (None: on them); None lengths keep the
+        default body."""
         if lengths is None:
             return
-        key = np.asarray(lengths, float).tobytes()
+        key = np.asarray(lengths, float).tobytes() + (b"" if offsets is None else np.asarray(offsets, float).tobytes())
         if key != self._lengths_key:
             self._lengths_key = key
-            self._body = Body.from_lengths(lengths, self.config.rigid_abs_tol, self.config.rigid_rel_tol)
+            self._body = Body.from_lengths(lengths, self.config.rigid_abs_tol, self.config.rigid_rel_tol,
+                                           offsets=offsets)
 
     def reset(self) -> None:
         """Forget every label (e.g. a new subject); keeps the body."""
@@ -444,6 +449,7 @@ class Labeller:
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
         self._swap_for_shins(out, assign, arow, right)
         self._swap_arms(out, assign, arow, t)
+        self._wrists_by_reach(out, assign, arow)
         # rigid distances and facing: drop the worse-predicted marker of a violating group
         for group in self._body.violations(out, narrowing=True):
             worst = max(group, key=lambda m: d[arow[m], m])
@@ -766,6 +772,23 @@ class Labeller:
                 log.debug("t=%.3f s: shoulder %d and its wrist swapped: the wrist's point fits the shoulder width", t, s)
                 self._arm_swap_since[i] = None
                 self._swap([(s, w)], out, assign, arow)
+
+    def _wrists_by_reach(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray) -> None:
+        """Two hands together (on a sword hilt, a clap) merge in the views and part with their
+        names either way round; named on points of their own they fit no rigid length better
+        one way than the other, until the arms stretch: a wrist beyond its arm's reach of its
+        shoulder (by ``reach_swap_m``) while the other naming puts both wrists within reach (by
+        ``reach_fit_m``) is the swap, and the names (and tracks) are swapped. Only with the
+        subject measured. out (8, 3), assign, arow (8,) in place."""
+        cfg = self.config
+        body = self._body
+        if not body.measured or not (assign[[LS, RS, LW, RW]] >= 0).all() or assign[LW] == assign[RW]:
+            return
+        def beyond(lw: int, rw: int) -> float:  # the farther wrist's excess over the reach (m)
+            return max(float(np.linalg.norm(out[lw] - out[LS])), float(np.linalg.norm(out[rw] - out[RS]))) - body.reach
+        if beyond(LW, RW) > cfg.reach_swap_m and beyond(RW, LW) < -cfg.reach_fit_m:
+            log.debug("wrists swapped: one was %.3f m beyond its reach", beyond(LW, RW))
+            self._swap([(LW, RW)], out, assign, arow)
 
     def _swap_to_fit(self, out: np.ndarray, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
                      t: float) -> None:

@@ -55,16 +55,19 @@ class Body:
 
     @staticmethod
     def from_lengths(lengths: np.ndarray | None, abs_tol: float = 0.05, rel_tol: float = 0.03,
-                     measured: bool = True) -> "Body":
+                     measured: bool = True, offsets: np.ndarray | None = None) -> "Body":
         """Body from (8,) bone lengths in BONE_TYPES order, or the default body when None.
         measured=False: the lengths are a prior (e.g. the motion database's mean body), with
-        the default body's wide tolerances."""
+        the default body's wide tolerances. offsets: (8, 3) m, the subject's markers off their
+        joint centres (skin markers): a wrist marker reaches at most the two offsets farther
+        from its shoulder marker than the joints do."""
         measured = measured and lengths is not None
         ln = np.asarray(DEFAULT_LENGTHS if lengths is None else lengths, float)
+        off = np.zeros(4) if offsets is None else np.linalg.norm(np.asarray(offsets, float)[[LS, RS, LW, RW]], axis=1)
         scale = ln[_B["shin"]] + ln[_B["thigh"]] + ln[_B["torso"]]
         tol = abs_tol + (rel_tol if measured else 0.15) * 0.5 * scale
         return Body(shin=float(ln[_B["shin"]]), shoulder_width=float(ln[_B["shoulder_width"]]),
-                    reach=float(ln[_B["upper_arm"]] + ln[_B["forearm"]]),
+                    reach=float(ln[_B["upper_arm"]] + ln[_B["forearm"]] + max(off[0] + off[2], off[1] + off[3])),
                     trunk=float(np.hypot(ln[_B["torso"]], 0.5 * (ln[_B["shoulder_width"]] - ln[_B["hip_width"]]))
                                 + ln[_B["thigh"]]),
                     top=shoulder_height(ln) + RISE_M + float(tol),

@@ -689,6 +689,57 @@ def test_a_hand_leaving_its_shoulder_with_the_names_swapped_gets_them_back(rule)
         assert not right[parted + int(0.2 * FPS):].any()
 
 
+@pytest.mark.parametrize("rule", [True, False])
+def test_hands_that_parted_from_a_hilt_swapped_are_named_right_once_an_arm_stretches(rule):
+    """Two hands on a sword hilt, 15 cm apart, one above the other in front of the chest; the
+    names come off the hilt swapped (injected: the wrists' tracks swapped). No rigid length
+    tells them apart there. As the sword is lowered and pushed forward (traced on swordplay,
+    002_07 on another body), the right wrist's name lies 3 cm beyond the arm's reach of the
+    right shoulder, while the other naming puts both wrists well within it: with the rule the
+    names swap back; without it they stay swapped."""
+    from dataclasses import replace
+
+    from samba_server.labelling.rigid import LS, LW, RS, RW
+
+    rig = default_rig(4)
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("apart", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    mid = 0.5 * (pose[LS] + pose[RS])
+    hilt, lowered = pose.copy(), pose.copy()
+    hilt[[LW, RW]] = mid + np.array([[-0.06, 0.30, -0.20], [-0.02, 0.30, -0.05]])
+    lowered[[LW, RW]] = mid + np.array([[-0.13, 0.30, -0.38], [-0.05, 0.15, -0.40]])
+    n = 150
+    truth = _blend(pose, hilt, n, 10, 40)
+    truth[70:] = _blend(hilt, lowered, n - 70, 0, 40)
+    cfg = LabelConfig() if rule else replace(LabelConfig(), reach_swap_m=float("inf"))
+    lab = Labeller(rig, config=cfg)
+    lab.set_lengths(DEFAULT_LENGTHS)
+    reach = lab._body.reach
+    assert np.linalg.norm(lowered[LW] - lowered[RS]) - reach > 0.025  # swapped, beyond the reach
+    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(5), 60, [LW, RW])
+    right = _right(named, truth).all(axis=1)
+    assert right[:60].all() and not right[60:80].any()  # swapped on the hilt
+    if rule:
+        assert right[110:].all()
+    else:
+        assert not right[110:].any()
+
+
+def test_a_stretched_arm_with_skin_markers_is_within_its_reach():
+    """Skin markers sit off the joint centres (acromion above the shoulder, back of the wrist
+    beyond it): with the arm stretched out the wrist marker lies farther from the shoulder
+    marker than the arm's bones reach, by more than the wrist swap by reach allows. The
+    subject's offsets widen the reach by them: the stretched arm is within it."""
+    from samba_server.labelling.rigid import LS, LW, Body
+
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("apart", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)].copy()
+    offsets = np.zeros((8, 3))
+    offsets[LS], offsets[LW] = [0.0, 0.0, 0.05], [-0.03, 0.0, 0.0]
+    pose[[LS, LW]] += offsets[[LS, LW]]
+    stretch = float(np.linalg.norm(pose[LW] - pose[LS]))
+    assert stretch - Body.from_lengths(DEFAULT_LENGTHS).reach > LabelConfig().reach_swap_m
+    assert stretch <= Body.from_lengths(DEFAULT_LENGTHS, offsets=offsets).reach
+
+
 #: a traced frame of a rendered take (bend over and scoop, 002_06): the subject crouching, the
 #: shoulders 62-78 cm up, a knee 48 cm; tracking named both shoulders, the right wrist, the right
 #: knee and both ankles right, the left wrist and knee hidden; a 2-view ghost below the floor
