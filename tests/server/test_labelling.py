@@ -4,6 +4,8 @@ labels, merged blobs and blackouts."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -153,8 +155,6 @@ def test_tracking_gone_wrong_is_corrected_by_a_fresh_identification(audit):
     skeleton) keeps itself wrong: mid-take the left knee and ankle tracks are moved onto the
     right leg and the right leg's tracks are lost (no skeleton to predict them). The audit by a fresh identification names every marker right again within 0.2 s;
     without it the left leg stays wrong or unnamed."""
-    from dataclasses import replace
-
     from samba_server.labelling.rigid import LA, LK, RA, RK
 
     rig = default_rig(4)
@@ -188,8 +188,6 @@ def test_a_wrist_that_took_a_shoulders_point_gives_it_back(unglue, wrist):
     track is moved onto the left shoulder and the shoulder's track dropped; the names are
     right again within 0.5 s, and stay wrong without the rule. (A right hand on the left
     shoulder kept its point to the end of a whole-clip take until the rule took either wrist.)"""
-    from dataclasses import replace
-
     from samba_server.labelling.rigid import LS, LW, RW
 
     W = LW if wrist == "left" else RW
@@ -534,6 +532,14 @@ def _blend(a: np.ndarray, b: np.ndarray, n: int, start: int, frames: int) -> np.
     s = np.clip((np.arange(n) - start) / frames, 0.0, 1.0)[:, None, None]
     return a[None] + s * (b - a)[None]
 
+def _measured(rig, rule: bool, **off) -> Labeller:
+    """A labeller for a subject measured with the default body, with its default settings
+    (rule) or with the settings ``off`` that switch a rule off."""
+    lab = Labeller(rig, config=LabelConfig() if rule else replace(LabelConfig(), **off))
+    lab.set_lengths(DEFAULT_LENGTHS)
+    return lab
+
+
 def _run_swapping_tracks(lab, rig, truth, rng, at: int, markers: list[int], renamed: list | None = None) -> np.ndarray:
     """Label truth (F, 8, 3) frame by frame; before frame ``at`` the tracks (position,
     velocity) of ``markers`` are reversed in order (a swap injected into tracking). (F, 8, 3);
@@ -558,17 +564,13 @@ def test_a_swapped_ankle_pair_that_breaks_both_shins_is_swapped_back(rule):
     merged point the wrong way round): nothing is crossed, so only the shins tell, both broken
     and both mended by swapping the ankles back. Right again at once with the rule; wrong to the
     end without it."""
-    from dataclasses import replace
-
     from samba_server.labelling.rigid import LA, LK, RA, RK
 
     rig = default_rig(4)
     stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
     raised = _legs_pose(np.array([0.06, 0.22]), np.array([0.08, 0.0]), left_knee_lift=0.3)
     truth = _blend(stand, raised, 120, 10, 40)
-    cfg = LabelConfig() if rule else replace(LabelConfig(), shin_swap_min=float("inf"), shin_mend_max=0.0)
-    lab = Labeller(rig, config=cfg)
-    lab.set_lengths(DEFAULT_LENGTHS)
+    lab = _measured(rig, rule, shin_swap_min=float("inf"), shin_mend_max=0.0)
     body = lab._body
     sw = raised.copy()
     sw[[LA, RA]] = raised[[RA, LA]]
@@ -589,8 +591,6 @@ def test_ankles_swapped_where_one_knee_is_a_shin_from_both_are_swapped_back(rule
     the standing ankle sits between the knees, a shin from both, so when the ankles' names
     swap only the other shin breaks. Swapping them back fits both shins: right again at once
     with the rule; without it the broken shin's knee is dropped and the swap stays."""
-    from dataclasses import replace
-
     from samba_server.labelling.rigid import LA, LK, RA, RK
 
     rig = default_rig(4)
@@ -605,9 +605,7 @@ def test_ankles_swapped_where_one_knee_is_a_shin_from_both_are_swapped_back(rule
     dx = float(step[LA, 0]) + 0.02 - float(step[RK, 0])  # the stepping ankle 2 cm right of the standing one
     step[RA] = step[RK] + [dx, 0.7 * shin, -np.sqrt(shin ** 2 - (0.7 * shin) ** 2 - dx ** 2)]
     truth = _blend(stand, step, 150, 10, 40)
-    cfg = LabelConfig() if rule else replace(LabelConfig(), shin_mend_max=0.0)
-    lab = Labeller(rig, config=cfg)
-    lab.set_lengths(DEFAULT_LENGTHS)
+    lab = _measured(rig, rule, shin_mend_max=0.0)
     body = lab._body
     assert body.shin_error(step[LK], step[RA]) > body.tol  # swapped: the left shin broken ...
     assert body.shin_error(step[RK], step[LA]) < 0.2 * body.tol  # ... the right one fits
@@ -632,8 +630,6 @@ def test_legs_named_with_the_knees_crossed_for_a_second_are_swapped_back(rule):
     names are swapped mid-take (knee and ankle together): the shins fit as well as before, and
     the ankles now look uncrossed, but the knees cross, which thighs hardly ever do for long.
     After 1 s of crossed knees the legs get their names back; without the rule they never do."""
-    from dataclasses import replace
-
     from samba_server.labelling.rigid import LA, LK, RA, RK
 
     rig = default_rig(4)
@@ -641,9 +637,7 @@ def test_legs_named_with_the_knees_crossed_for_a_second_are_swapped_back(rule):
     fifth = _legs_pose(np.array([0.06, 0.07]), np.array([-0.06, -0.07]))
     n = 200
     truth = _blend(stand, fifth, n, 10, 40)
-    cfg = LabelConfig() if rule else replace(LabelConfig(), knees_crossed_s=float("inf"))
-    lab = Labeller(rig, config=cfg)
-    lab.set_lengths(DEFAULT_LENGTHS)
+    lab = _measured(rig, rule, knees_crossed_s=float("inf"))
     named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(10), 70, [LK, LA, RA, RK])
     right = _right(named, truth).all(axis=1)
     assert right[:70].all()
@@ -662,8 +656,6 @@ def test_a_hand_leaving_its_shoulder_with_the_names_swapped_gets_them_back(rule)
     the arm and within the rigid tolerance of the shoulder width. With the rule the shoulder
     width from the left shoulder tells them apart within 0.2 s of parting; without it they stay
     swapped."""
-    from dataclasses import replace
-
     from samba_server.labelling.rigid import RS, RW
 
     rig = default_rig(4)
@@ -675,9 +667,7 @@ def test_a_hand_leaving_its_shoulder_with_the_names_swapped_gets_them_back(rule)
     n = 150
     truth = _blend(pose, on_shoulder, n, 10, 40)
     truth[70:] = _blend(on_shoulder, away, n - 70, 10, 30)
-    cfg = LabelConfig() if rule else replace(LabelConfig(), arm_swap_s=float("inf"))
-    lab = Labeller(rig, config=cfg)
-    lab.set_lengths(DEFAULT_LENGTHS)
+    lab = _measured(rig, rule, arm_swap_s=float("inf"))
     named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(11), 75, [RS, RW])
     right = _right(named, truth).all(axis=1)
     assert right[:45].all()  # until the hand reaches the shoulder (then one merged point)
@@ -697,8 +687,6 @@ def test_hands_that_parted_from_a_hilt_swapped_are_named_right_once_an_arm_stret
     002_07 on another body), the right wrist's name lies 3 cm beyond the arm's reach of the
     right shoulder, while the other naming puts both wrists well within it: with the rule the
     names swap back; without it they stay swapped."""
-    from dataclasses import replace
-
     from samba_server.labelling.rigid import LS, LW, RS, RW
 
     rig = default_rig(4)
@@ -710,9 +698,7 @@ def test_hands_that_parted_from_a_hilt_swapped_are_named_right_once_an_arm_stret
     n = 150
     truth = _blend(pose, hilt, n, 10, 40)
     truth[70:] = _blend(hilt, lowered, n - 70, 0, 40)
-    cfg = LabelConfig() if rule else replace(LabelConfig(), reach_swap_m=float("inf"))
-    lab = Labeller(rig, config=cfg)
-    lab.set_lengths(DEFAULT_LENGTHS)
+    lab = _measured(rig, rule, reach_swap_m=float("inf"))
     reach = lab._body.reach
     assert np.linalg.norm(lowered[LW] - lowered[RS]) - reach > 0.025  # swapped, beyond the reach
     named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(5), 60, [LW, RW])
@@ -760,8 +746,6 @@ def test_an_audit_does_not_move_a_crouching_subjects_tracked_names(move_margin):
     benchmark's take then never recovered: 29.5 % of frames right). An audit that moves >= 2
     tracked names needs ``audit_move_margin`` (2.0) over them, not ``audit_margin`` (1.0):
     with that the tracked names stand; with the old margin they are overturned."""
-    from dataclasses import replace
-
     from samba_server.labelling.labeller import LabelQuality
 
     c = _CROUCH
@@ -976,8 +960,6 @@ def test_a_wrist_and_its_shoulder_named_the_other_way_round_fit_no_body_and_are_
     does not: no body in it (here without the clip the pose comes from) takes the pose the
     swapped names make. With the rule (the server hands the labeller the reconstructor's
     ``body_distance``) the names come back within 0.1 s; without it they stay swapped."""
-    from dataclasses import replace
-
     from samba_server.labelling.rigid import LS, LW
     from samba_server.recon.db import load_default_db
     from samba_server.recon.reconstruct import Reconstructor
@@ -1081,8 +1063,6 @@ def test_a_knee_and_its_ankle_named_the_other_way_round_in_a_high_kick_are_swapp
     within 1 cm. With the rule (``refit_s``) the server swaps the names within 0.1 s, and the
     frames after carry the renamed bits; without it they stay swapped. (Raising the leg names
     nothing wrongly: see the mirror test below.)"""
-    from dataclasses import replace
-
     from samba_server.labelling.rigid import RA, RK
     from samba_server.recon.reconstruct import Reconstructor
     from samba_server.server import Server
@@ -1122,8 +1102,6 @@ def test_a_straight_leg_raised_in_front_does_not_turn_the_names_round(window):
     marker for its other side, for good. The mirror image turns a body round in one frame:
     only names just identified can be mirrored, so the rule tries it only ``fit_mirror_s``
     after an identification; the names stay right. Without that window every name is wrong."""
-    from dataclasses import replace
-
     from samba_server.recon.reconstruct import Reconstructor
     from samba_server.server import Server
 
@@ -1150,8 +1128,6 @@ def test_a_subject_climbing_up_a_structure_keeps_every_name_up_there(ceiling):
     the shoulders 2.6-2.8 m up): tracking keeps all eight names. Points higher than the top of
     the capture volume (``z_max``) are not markers; at the old 2.7 m the shoulders and wrists
     left the volume and were lost up there."""
-    from dataclasses import replace
-
     from samba_server.labelling.points import PointsConfig
 
     rig = default_rig(4)
