@@ -3,9 +3,10 @@
 A :class:`MoteActivity` sees every decoded :class:`~samba_common.wire.MarkerPacket` (as a
 ``Server.packet_listeners`` entry, or called directly by ``samba-process``) and, at the end
 of a take, :meth:`MoteActivity.warnings` gives one line per problem: a camera of the
-calibration that sent nothing, a mote that saw no blob in any frame, a mote that saw blobs
-but never labelled a marker (its blobs are still used, the server names them in 3D, but the
-user should know the mote never found the standard pose).
+calibration that sent nothing, a mote that saw no blob in any frame. A mote that saw blobs
+but never labelled a marker is a note (:meth:`MoteActivity.notes`), not a problem: its blobs
+are still used, the server names them in 3D, and its 2D standard-pose template (feet apart)
+does not match a subject standing with the feet at hip width, as most do.
 """
 
 from __future__ import annotations
@@ -41,9 +42,8 @@ class MoteActivity:
             if (labels < self.n_markers).any():
                 c.with_labels += 1
 
-    def warnings(self, labelled: bool = True) -> list[str]:
-        """One line per mote that contributed nothing useful. ``labelled=False`` for takes where
-        the motes publish unlabelled blobs on purpose (wand calibration)."""
+    def warnings(self) -> list[str]:
+        """One line per camera of the calibration that sent nothing and per mote that saw no blob."""
         out = []
         for cam in self.cameras:
             if cam not in self.motes:
@@ -52,7 +52,11 @@ class MoteActivity:
             if c.with_blobs == 0:
                 out.append(f"mote {mote}: no blob in any of its {c.packets} frames (lens covered, exposure or "
                            "threshold? check with samba-mote --preview DIR)")
-            elif labelled and c.with_labels == 0:
-                out.append(f"mote {mote}: blobs in {c.with_blobs} of {c.packets} frames but it never labelled a "
-                           "marker (it did not see the standard pose); the server still names its blobs in 3D")
         return out
+
+    def notes(self) -> list[str]:
+        """One line per mote that saw blobs but never labelled a marker (its 2D standard-pose
+        template never matched): the server named its blobs in 3D all the same."""
+        return [f"mote {mote}: blobs in {c.with_blobs} of {c.packets} frames, none labelled by the mote (its 2D "
+                "standard-pose template did not match); the server named its blobs in 3D"
+                for mote, c in sorted(self.motes.items()) if c.with_blobs and c.with_labels == 0]

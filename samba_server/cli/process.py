@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from pathlib import Path
 
@@ -18,6 +19,8 @@ from samba_server.activity import MoteActivity
 from samba_server.app import add_placement_arg, build_server, load_server_configs, setup_logging
 from samba_server.process import VideoError, _open_video, process_videos
 from samba_server.record import RecorderError
+
+log = logging.getLogger(__name__)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -89,6 +92,8 @@ def main(argv: list[str] | None = None) -> int:
     note = getattr(server.reconstructor, "placement_note", None)
     if note:
         print(f"marker placement: {note}", file=sys.stderr)
+    for line in activity.notes():
+        log.info(line)
     for line in activity.warnings() + unnamed_warnings(extra["markers"], joints):
         print(f"samba-process: WARNING: {line}", file=sys.stderr)
     if solved < 0.5 * len(t):

@@ -4,6 +4,7 @@ the server pipeline in-process (:func:`samba_server.replay.replay_into`) and wri
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 import threading
 from pathlib import Path
@@ -16,6 +17,8 @@ from samba_server.app import add_network_args, export_joints, load_server_config
 from samba_server.record import TakeReader, take_placement
 from samba_server.replay import Player, replay_into, take_calibration, take_subject
 from samba_server.server import Server, ServerConfig
+
+log = logging.getLogger(__name__)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -61,6 +64,8 @@ def main(argv: list[str] | None = None) -> int:
             frames = export_joints(server, args.out)
             note = " (take truncated: read up to its last complete record)" if reader.truncated else ""
             print(f"wrote {args.out}: {frames} frames, {server.stats.solved} solved{note}", file=sys.stderr)
+            for line in activity.notes():
+                log.info(line)
             for line in activity.warnings():
                 print(f"samba-replay: WARNING: {line}", file=sys.stderr)
             return 0
