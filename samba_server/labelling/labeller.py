@@ -976,8 +976,11 @@ class Labeller:
         # markers (a leg named on the other leg moves two names and names the other two)
         moved = int(np.count_nonzero((assign >= 0) & (best.labels >= 0) & (best.labels != assign)))
         gained = int(np.count_nonzero(best.labels >= 0)) - int(np.count_nonzero(assign >= 0))
+        # moving names (>= 2 of them without naming two more, or any while all eight are named
+        # on points: then a free sure point is a ghost or a reflection, not a lost marker)
+        complete = bool((assign >= 0).all())
         need = cfg.audit_extend_margin if extends else \
-            (cfg.audit_move_margin if moved >= 2 and gained < 2 else cfg.audit_margin)
+            (cfg.audit_move_margin if (moved >= 2 and gained < 2) or complete else cfg.audit_margin)
         if tracked is None:
             if np.count_nonzero(best.labels >= 0) < q.n_labelled + 2:
                 return None
