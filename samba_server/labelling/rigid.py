@@ -96,9 +96,10 @@ class Body:
         NARROW of it (for names tracked from the last frame; new names are held to the width)."""
         seen = np.isfinite(markers).all(axis=1)
         out: list[tuple[int, ...]] = []
-        arms_up = seen[[LS, RS, LW, RW]].all() and \
+        # only tracked names may narrow (the recovery's candidate checks call this per candidate)
+        arms_up = narrowing and seen[[LS, RS, LW, RW]].all() and \
             min(markers[LW, 2] - markers[LS, 2], markers[RW, 2] - markers[RS, 2]) >= ARMS_UP_M
-        width = self.narrowed_error if narrowing and arms_up else self.width_error
+        width = self.narrowed_error if arms_up else self.width_error
         if seen[LS] and seen[RS] and width(markers[LS], markers[RS]) > self.tol:
             out.append((LS, RS))
         for s, w, k, a in SIDES:
