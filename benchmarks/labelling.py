@@ -15,7 +15,9 @@ clips first run on 2026-11-27 on that day's finished code ("fresh") are summed u
 Per take: share of frames with every visible marker named right, frames with a wrong name,
 share of confident frames (a pose from >= 4 named markers) with a joint > 20 cm off (in
 brackets: the same share when the solver is fed the true markers, i.e. what the solver alone
-gets wrong) and with a marker-carrying joint > 20 cm off (what wrong names cause),
+gets wrong) and with a marker-carrying joint > 20 cm off (what wrong names cause), the share
+with a *confidently* wrong joint (> 20 cm off while its own bound, samba_server.recon.bounds,
+claims < 20 cm) and the share of joints the bounds flag as unsure,
 re-acquisition time after the blackout, the longest pose output into the blackout, and MPJPE
 next to the same take reconstructed from the true markers (same database and solver, same
 blackout, solved the same way: forwards and backwards merged, or forwards only with
@@ -46,6 +48,7 @@ from samba_mote.sim.take import load_motion, make_take, prepare_motion  # noqa: 
 from samba_server.app import load_server_configs  # noqa: E402
 from samba_server.labelling.score import score_take, separable_visible  # noqa: E402
 from samba_server.process import process_videos  # noqa: E402
+from samba_server.recon.bounds import CONFIDENT_M  # noqa: E402
 from samba_server.recon.db import MotionDB, build_db  # noqa: E402
 from samba_server.recon.evaluate import vary_body  # noqa: E402
 from samba_server.recon.reconstruct import Reconstructor, solve_both_ways, solve_frames  # noqa: E402
@@ -74,23 +77,28 @@ CLIPS = TUNED + CHECKED + UNSEEN + FRESH
 
 
 def true_marker_reference(truth: np.ndarray, t: np.ndarray, blackout: np.ndarray, db, n_lead: int,
-                          both_ways: bool) -> tuple[float, float]:
+                          both_ways: bool) -> tuple[float, float, float]:
     """The solver fed the true markers (NaN in the blackout), solved as the scored output is
     (both_ways: forwards and backwards, merged, as samba-process; else forwards, as live): MPJPE
-    over the motion frames and the share of solved frames with a joint > 20 cm off (what the
-    solver alone gets wrong)."""
+    over the motion frames, the share of solved frames with a joint > 20 cm off (what the
+    solver alone gets wrong) and with one so wrong while its bound claims < 20 cm."""
     rec = Reconstructor(db=db)
     markers = truth[:, list(MARKER_JOINT)].copy()
     markers[blackout] = np.nan
     if both_ways:
-        est = solve_both_ways(rec, markers, t)[0]
+        est, results = solve_both_ways(rec, markers, t)
     else:
-        est = np.array([r.joints for r in solve_frames(rec, markers, t, range(len(t)))])
+        results = solve_frames(rec, markers, t, range(len(t)))
+        est = np.array([r.joints for r in results])
+    sure = np.array([r.bounds for r in results]) < CONFIDENT_M
     ok = np.isfinite(est).all(axis=(1, 2))
     err = np.linalg.norm(est - truth, axis=-1)
-    far = float((np.nanmax(np.where(ok[:, None], err, 0.0), axis=1) > 0.2)[ok].mean()) if ok.any() else float("nan")
+    far = np.where(ok[:, None], err, 0.0) > 0.2
+    nan = float("nan")
+    share = float(far.any(axis=1)[ok].mean()) if ok.any() else nan
+    share_sure = float((far & sure).any(axis=1)[ok].mean()) if ok.any() else nan
     ok[:n_lead] = False
-    return (float(err[ok].mean()) if ok.any() else float("nan")), far
+    return (float(err[ok].mean()) if ok.any() else nan), share, share_sure
 
 
 def main() -> int:
@@ -142,19 +150,22 @@ def main() -> int:
             vis = separable_visible(np.stack([c.uv for c in take.cameras]), np.stack([c.visible for c in take.cameras]),
                                     np.stack([c.radius for c in take.cameras]))[:F]
             blackout = take.blackout[:F] if take.blackout is not None else np.zeros(F, bool)
-            s = score_take(extra["markers"][:F], est[:F], take.joints[:F], vis, blackout, cfg.fps, take.n_tpose)
-            live = extra.get("live", {"markers": extra["markers"], "joints": est})  # the forward pass: samba-server's
+            s = score_take(extra["markers"][:F], est[:F], take.joints[:F], vis, blackout, cfg.fps, take.n_tpose,
+                           bounds=extra["joint_bound"][:F])
+            live = extra.get("live", {"markers": extra["markers"], "joints": est,  # the forward pass: samba-server's
+                                      "joint_bound": extra["joint_bound"]})
             s_live = score_take(live["markers"][:F], live["joints"][:F], take.joints[:F], vis, blackout, cfg.fps,
-                                take.n_tpose)
-            ref, ref_far = true_marker_reference(take.joints[:F], take.t[:F], blackout, db, take.n_tpose,
+                                take.n_tpose, bounds=live["joint_bound"][:F])
+            ref, ref_far, ref_sure = true_marker_reference(take.joints[:F], take.t[:F], blackout, db, take.n_tpose,
                                                  not args.one_pass)
             reacq = ", ".join("never" if not np.isfinite(r) else f"{r:.2f}" for r in s.reacquire_s) or "-"
             kind = next((k for k, clips in KINDS.items() if clip in clips), "unseen")
             rows.append(f"| {clip} ({kind}) | {n_cam} | {F} | {100 * s.correct:.1f} ({100 * s_live.correct:.1f}) | {s.wrong_frames} | "
-                        f"{100 * s.confident_wrong:.1f} ({100 * ref_far:.1f}) | {100 * s.confident_wrong_marker:.1f} | {100 * s.solved:.1f} | {reacq} | "
+                        f"{100 * s.confident_wrong:.1f} ({100 * ref_far:.1f}) | {100 * s.confident_wrong_marker:.1f} | "
+                        f"{100 * s.bound_wrong:.1f} ({100 * ref_sure:.1f}) | {100 * s.unsure_joints:.1f} | {100 * s.solved:.1f} | {reacq} | "
                         f"{s.blackout_pose_s:.2f} | {100 * s.mpjpe_m:.2f} | {100 * ref:.2f} | {ms:.1f} |")
             print(rows[-1], flush=True)
-            agg[(n_cam, kind)].append((s, ref, ref_far, s_live))
+            agg[(n_cam, kind)].append((s, ref, ref_far, s_live, ref_sure))
     summary = []
     for (n_cam, kind), items in agg.items():
         if not items:
@@ -168,25 +179,32 @@ def main() -> int:
         conf = np.nanmean([s.confident_wrong for s in sc])
         conf_m = np.nanmean([s.confident_wrong_marker for s in sc])
         conf_ref = np.nanmean([it[2] for it in items])
+        sure = np.nanmean([s.bound_wrong for s in sc])
+        sure_live = np.nanmean([it[3].bound_wrong for it in items])
+        sure_ref = np.nanmean([it[4] for it in items])
+        unsure = np.nanmean([s.unsure_joints for s in sc])
         reacq = [r for s in sc for r in s.reacquire_s]
         never = sum(1 for r in reacq if not np.isfinite(r))
         fin = [r for r in reacq if np.isfinite(r)]
-        d_mpjpe = np.nanmean([s.mpjpe_m - ref for s, ref, _far, _live in items])
+        d_mpjpe = np.nanmean([it[0].mpjpe_m - it[1] for it in items])
         summary.append(
             f"- {n_cam} cameras, {len(items)} {kind} takes: **{100 * correct:.1f} %** of frames with every visible marker named "
             f"right (target >= 99 % with 4 cameras; live, labelled forwards only: {100 * correct_live:.1f} %, "
             f"{100 * conf_live:.2f} % confidently > 20 cm off); {wrong} frames with a wrong name ({100 * wrong / max(frames, 1):.2f} %); "
             f"**{100 * conf:.2f} %** confident frames (>= 4 markers named) with a joint > 20 cm off (target <= 0.5 %; "
             f"{100 * conf_ref:.2f} % with the true markers), **{100 * conf_m:.2f} %** with a marker-carrying joint > 20 cm off; "
+            f"**{100 * sure:.2f} %** with a confidently wrong joint (> 20 cm off, its bound < 20 cm; live {100 * sure_live:.2f} %, "
+            f"true markers {100 * sure_ref:.2f} %), {100 * unsure:.1f} % of their joints flagged unsure; "
             f"re-acquisition after "
             f"the blackout: max **{max(fin) if fin else float('nan'):.2f} s**"
             f"{f', never in {never} takes' if never else ''} (target <= 0.5 s); longest pose into a blackout "
             f"{max(s.blackout_pose_s for s in sc):.2f} s (target <= 0.5 s); MPJPE **{100 * d_mpjpe:+.2f} cm** over the "
             f"true-marker reconstruction (target <= +0.5 cm)")
     table = ["| clip | cameras | frames | frames all right (%) (live) | frames with a wrong name | joint > 20 cm (% of confident; "
-             "true markers) | marker joint > 20 cm (% of confident) | solved (% outside blackout) | re-acquired after (s) | "
+             "true markers) | marker joint > 20 cm (% of confident) | confidently wrong joint (% of confident; true "
+             "markers) | joints flagged unsure (%) | solved (% outside blackout) | re-acquired after (s) | "
              "pose into blackout (s) | MPJPE (cm) | true-marker MPJPE (cm) | ms/frame |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows]
     print("\n".join(summary))
     if not args.no_record:
         record("Marker identification (benchmarks/labelling.py)",

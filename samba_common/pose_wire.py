@@ -1,11 +1,12 @@
 """Pose wire format: what the server publishes on ``samba/{session}/pose`` (binary) and
 ``samba/{session}/pose/json`` (JSON), and records on the ``/pose`` MCAP channel.
 
-Binary, version 2, little endian::
+Binary, version 3, little endian::
 
     header "<4sBBHIqffBBHfBB" (38 bytes)
         magic       4s  b"SMBP"
-        version     B   2 (version 1, without the last three fields, is still read)
+        version     B   3 (version 2, without joint bounds, and version 1, also without the
+                        last three header fields, are still read)
         flags       B   FLAG_* bit set
         n_joints    H   13 (JOINT_NAMES order)
         seq         I   pose counter (wraps at 2**32)
@@ -21,6 +22,9 @@ Binary, version 2, little endian::
         reserved    B   0
     joints   n_joints x 3 float32, world metres Z up; NaN when unsolved
     markers  8 x 3 float32 triangulated markers (NaN = missing), only if FLAG_MARKERS
+    bounds   n_joints float32 per-joint error bounds, metres (inf = unknown), only if
+             FLAG_BOUNDS: how far each joint may be from the truth; below 0.2 m a joint is
+             confident (samba_server.recon.bounds)
 
 JSON variant (UTF-8, one object; NaN becomes ``null``)::
 
@@ -28,7 +32,8 @@ JSON variant (UTF-8, one object; NaN becomes ``null``)::
      "t": 1700000000.1234568, "latency_ms": 2.1, "residual_m": 0.004, "n_markers": 8,
      "n_views": 4, "marker_mask": 255, "label_margin_m": 0.08, "label_mode": "tracking",
      "flags": ["solved"], "joint_names": [...13 names...],
-     "joints": [[x, y, z], ...13 rows..., or null rows], "markers": [[x, y, z] | null, ...8]}
+     "joints": [[x, y, z], ...13 rows..., or null rows], "markers": [[x, y, z] | null, ...8],
+     "joint_bound": [0.02, ...13 metres or null (unknown)] or null}
 """
 
 from __future__ import annotations
@@ -43,7 +48,7 @@ import numpy as np
 from .skeleton import JOINT_NAMES, N_JOINTS, N_MARKERS
 
 MAGIC = b"SMBP"
-VERSION = 2
+VERSION = 3
 HEADER = struct.Struct("<4sBBHIqffBBHfBB")
 HEADER_V1 = struct.Struct("<4sBBHIqffBBH")
 #: label_mode values, by index
@@ -55,6 +60,7 @@ FLAG_INCOMPLETE = 0x04  #: at least one live mote had no packet in this frame
 FLAG_LABEL_OVERRIDDEN = 0x08  #: the 3D labelling named a blob otherwise than its mote did
 FLAG_SOLVE_SKIPPED = 0x10  #: live: the frame was older than max_lag_ms, so its solve was skipped
 FLAG_LABEL_RENAMED = 0x20  #: the labelling found the names it held until the frame before wrong, and replaced them
+FLAG_BOUNDS = 0x40  #: the per-joint error bounds follow the joints (and markers)
 FLAG_NAMES = {FLAG_SOLVED: "solved", FLAG_MARKERS: "markers", FLAG_INCOMPLETE: "incomplete",
               FLAG_LABEL_OVERRIDDEN: "label_overridden", FLAG_SOLVE_SKIPPED: "solve_skipped",
               FLAG_LABEL_RENAMED: "label_renamed"}
@@ -68,7 +74,8 @@ class PoseError(ValueError):
 class PoseMessage:
     """One published pose.
 
-    joints: (13, 3) float world metres (NaN rows when unsolved); markers: (8, 3) float or None.
+    joints: (13, 3) float world metres (NaN rows when unsolved); markers: (8, 3) float or None;
+    joint_bound: (13,) float metres, how far each joint may be off (inf = unknown), or None.
     """
 
     seq: int
@@ -83,6 +90,7 @@ class PoseMessage:
     marker_mask: int = 0
     label_margin_m: float = float("nan")
     label_mode: str = "lost"
+    joint_bound: np.ndarray | None = None
     extra: dict = field(default_factory=dict)
 
     @property
@@ -95,7 +103,7 @@ def encode_pose(m: PoseMessage) -> bytes:
     joints = np.asarray(m.joints, dtype="<f4")
     if joints.shape != (N_JOINTS, 3):
         raise PoseError(f"joints must be ({N_JOINTS}, 3), got {joints.shape}")
-    flags = m.flags & ~FLAG_MARKERS
+    flags = m.flags & ~(FLAG_MARKERS | FLAG_BOUNDS)
     tail = b""
     if m.markers is not None:
         markers = np.asarray(m.markers, dtype="<f4")
@@ -103,6 +111,12 @@ def encode_pose(m: PoseMessage) -> bytes:
             raise PoseError(f"markers must be ({N_MARKERS}, 3), got {markers.shape}")
         flags |= FLAG_MARKERS
         tail = markers.tobytes()
+    if m.joint_bound is not None:
+        bound = np.asarray(m.joint_bound, dtype="<f4")
+        if bound.shape != (N_JOINTS,):
+            raise PoseError(f"joint_bound must be ({N_JOINTS},), got {bound.shape}")
+        flags |= FLAG_BOUNDS
+        tail += bound.tobytes()
     try:
         head = HEADER.pack(MAGIC, VERSION, flags, N_JOINTS, m.seq & 0xFFFFFFFF, int(m.t_ns),
                            float(m.latency_ms), float(m.residual_m), min(int(m.n_markers), 255),
@@ -121,17 +135,20 @@ def decode_pose(buf: bytes | bytearray | memoryview) -> PoseMessage:
     magic, ver, flags, nj, seq, t_ns, lat, res, nm, nv, mask = HEADER_V1.unpack_from(buf)
     if magic != MAGIC:
         raise PoseError(f"bad magic {magic!r} (expected {MAGIC!r})")
-    if ver not in (1, VERSION):
-        raise PoseError(f"unsupported pose version {ver} (this build reads 1 and {VERSION})")
+    if ver not in (1, 2, VERSION):
+        raise PoseError(f"unsupported pose version {ver} (this build reads 1 to {VERSION})")
+    if ver < 3:
+        flags &= ~FLAG_BOUNDS
     margin, mode, head = float("nan"), "lost", HEADER_V1
-    if ver == VERSION:
+    if ver >= 2:
         if len(buf) < HEADER.size:
             raise PoseError(f"truncated pose: {len(buf)} bytes < header {HEADER.size}")
         margin, mode_i = HEADER.unpack_from(buf)[11:13]
         mode, head = LABEL_MODES[mode_i] if mode_i < len(LABEL_MODES) else "lost", HEADER
     if nj != N_JOINTS:
         raise PoseError(f"pose has {nj} joints, expected {N_JOINTS}")
-    expected = head.size + nj * 12 + (N_MARKERS * 12 if flags & FLAG_MARKERS else 0)
+    n_mk = N_MARKERS * 12 if flags & FLAG_MARKERS else 0
+    expected = head.size + nj * 12 + n_mk + (nj * 4 if flags & FLAG_BOUNDS else 0)
     if len(buf) != expected:
         raise PoseError(f"pose is {len(buf)} bytes, header says {expected}")
     joints = np.frombuffer(buf, "<f4", count=nj * 3, offset=head.size).reshape(nj, 3).astype(np.float64)
@@ -139,7 +156,19 @@ def decode_pose(buf: bytes | bytearray | memoryview) -> PoseMessage:
     if flags & FLAG_MARKERS:
         markers = np.frombuffer(buf, "<f4", count=N_MARKERS * 3, offset=head.size + nj * 12)
         markers = markers.reshape(N_MARKERS, 3).astype(np.float64)
-    return PoseMessage(seq, t_ns, joints, lat, res, nm, nv, flags, markers, mask, float(margin), mode)
+    bound = None
+    if flags & FLAG_BOUNDS:
+        bound = np.frombuffer(buf, "<f4", count=nj, offset=head.size + nj * 12 + n_mk).astype(np.float64)
+    return PoseMessage(seq, t_ns, joints, lat, res, nm, nv, flags, markers, mask, float(margin), mode, bound)
+
+
+def stack_bounds(poses: list[PoseMessage]) -> np.ndarray:
+    """The joint bounds of poses as one (F, 13) array, metres (inf where a pose has none)."""
+    out = np.full((len(poses), N_JOINTS), np.inf)
+    for i, p in enumerate(poses):
+        if p.joint_bound is not None:
+            out[i] = p.joint_bound
+    return out
 
 
 def _rows(a: np.ndarray | None) -> list | None:
@@ -161,6 +190,7 @@ def pose_to_json(m: PoseMessage) -> bytes:
         "label_margin_m": _num(m.label_margin_m, 4), "label_mode": m.label_mode,
         "flags": [name for bit, name in FLAG_NAMES.items() if m.flags & bit and bit != FLAG_MARKERS],
         "joint_names": list(JOINT_NAMES), "joints": _rows(m.joints), "markers": _rows(m.markers),
+        "joint_bound": None if m.joint_bound is None else [_num(float(b), 4) for b in m.joint_bound],
     }
     return json.dumps(d, separators=(",", ":"), allow_nan=False).encode("utf-8")
 
@@ -189,6 +219,12 @@ def pose_from_json(buf: bytes | str) -> PoseMessage:
         markers = None if d.get("markers") is None else arr(d["markers"], N_MARKERS)
         if markers is not None:
             flags |= FLAG_MARKERS
+        bound = None
+        if d.get("joint_bound") is not None:
+            bound = np.array([np.inf if b is None else float(b) for b in d["joint_bound"]], float)
+            if bound.shape != (N_JOINTS,):
+                raise ValueError(f"joint_bound has {bound.size} entries, expected {N_JOINTS}")
+            flags |= FLAG_BOUNDS
         nan = float("nan")
         return PoseMessage(int(d["seq"]), int(d["t_ns"]), arr(d["joints"], N_JOINTS),
                            nan if d.get("latency_ms") is None else float(d["latency_ms"]),
@@ -196,6 +232,6 @@ def pose_from_json(buf: bytes | str) -> PoseMessage:
                            int(d.get("n_markers", 0)), int(d.get("n_views", 0)), flags, markers,
                            int(d.get("marker_mask", 0)),
                            nan if d.get("label_margin_m") is None else float(d["label_margin_m"]),
-                           str(d.get("label_mode", "lost")))
+                           str(d.get("label_mode", "lost")), bound)
     except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise PoseError(f"pose JSON malformed: {exc}") from None

@@ -145,9 +145,10 @@ def build_server(calibration: str | os.PathLike, configs: ServerConfigs, db: str
 
 def export_joints(server: Server, path: str | os.PathLike) -> int:
     """Write the server's pose history as joints.npz (extra keys: t_ns, residual, n_markers,
-    markers, and the subject in use at the end: subject_lengths, subject_offsets,
+    markers, joint_bound, and the subject in use at the end: subject_lengths, subject_offsets,
     subject_placement). Returns the number of frames."""
     from samba_common.formats import save_joints
+    from samba_common.pose_wire import stack_bounds
 
     joints, t = server.joints_array()
     poses = server.poses
@@ -155,7 +156,8 @@ def export_joints(server: Server, path: str | os.PathLike) -> int:
     extra = subject.metadata() if subject is not None else {}
     save_joints(path, joints, t, t_ns=np.array([p.t_ns for p in poses], dtype=np.int64),
                 residual=np.array([p.residual_m for p in poses]), n_markers=np.array([p.n_markers for p in poses]),
-                markers=np.stack([p.markers for p in poses]) if poses else np.zeros((0, 8, 3)), **extra)
+                markers=np.stack([p.markers for p in poses]) if poses else np.zeros((0, 8, 3)),
+                joint_bound=stack_bounds(poses), **extra)
     return len(poses)
 
 

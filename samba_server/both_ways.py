@@ -399,5 +399,6 @@ def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: P
     joints, results = solve_both_ways(server.reconstructor.again(), markers, t)
     extra = {"markers": markers, "residual": np.array([r.residual for r in results], float),
              "n_markers": np.isfinite(markers).all(axis=2).sum(axis=1),
-             "label_margin": np.where(take_b, bwd.margin, fwd.margin), "from_backward": take_b}
+             "label_margin": np.where(take_b, bwd.margin, fwd.margin), "from_backward": take_b,
+             "joint_bound": np.array([r.bounds for r in results], float).reshape(len(t), -1)}
     return joints, extra

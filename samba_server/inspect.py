@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from samba_common.pose_wire import PoseError, decode_pose
+from samba_common.pose_wire import PoseError, decode_pose, stack_bounds
 from samba_common.wire import PacketError, decode_packet
 
 from .record import CALIBRATION_TOPIC, EVENTS_TOPIC, POSE_TOPIC, TakeReader
@@ -116,4 +116,5 @@ def pose_arrays(s: TakeSummary) -> tuple[np.ndarray, np.ndarray, dict]:
     markers = np.stack([p.markers if p.markers is not None else np.full((8, 3), np.nan) for p in s.poses])
     return joints, t, {"markers": markers, "residual": np.array([p.residual_m for p in s.poses]),
                        "latency_ms": np.array([p.latency_ms for p in s.poses]),
+                       "joint_bound": stack_bounds(s.poses),
                        "t_ns": np.array([p.t_ns for p in s.poses], dtype=np.int64)}

@@ -138,6 +138,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     residual = np.full(n_frames, np.nan)
     margin = np.full(n_frames, np.nan)
     n_markers = np.zeros(n_frames, int)
+    bound = np.full((n_frames, 13), np.inf)
     renamed = np.zeros(n_frames, np.int64)
     identified = np.full(n_frames, np.nan)
     t_live = np.arange(n_frames) / fps  # the server's own frame times (s since its first frame)
@@ -147,10 +148,13 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
         if 0 <= k < n_frames:
             joints[k], markers[k], residual[k], n_markers[k] = p.joints, p.markers, p.residual_m, p.n_markers
             margin[k] = p.label_margin_m
+            if p.joint_bound is not None:
+                bound[k] = p.joint_bound
             renamed[k], identified[k] = labelled_by_seq.get(p.seq, (0, np.nan))
             t_live[k] = (p.t_ns - t0_ns) / 1e9
     t = np.arange(n_frames) / fps
-    extra = {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin}
+    extra = {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin,
+             "joint_bound": bound}
     if both_ways:
         from .both_ways import PassResult, relabel_both_ways
 
@@ -158,7 +162,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
         again = relabel_both_ways(server, kept[:n_frames], t_live, PassResult(markers, renamed, margin, identified),
                                   progress)
         if again is not None:
-            live = {"joints": joints, "markers": markers}
+            live = {"joints": joints, "markers": markers, "joint_bound": bound}
             joints, extra = again
             extra["live"] = live
     return joints, t, extra

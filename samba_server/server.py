@@ -287,13 +287,14 @@ class Server:
         mask = marker_bits(np.isfinite(pts).all(axis=1))
         return pts, mask, quality
 
-    def solve_markers(self, markers: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, float]:
+    def solve_markers(self, markers: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
         """Solve the named markers (8, 3) of the frame at t s: ((8, 3) markers, (13, 3) joints,
-        NaN if unsolved; residual m). Names the solver cannot fit go back to the labelling
+        NaN if unsolved; residual m; (13,) joint bounds m, inf if unsolved). Names the solver cannot fit go back to the labelling
         (:meth:`Labeller.refit`), which may swap them: the frame is then solved again with the
         new names, which are returned. A solved pose feeds the labelling's predictions; a
         solver error is logged and leaves the frame unsolved."""
         joints, residual = np.full((N_JOINTS, 3), np.nan), float("nan")
+        bounds = np.full(N_JOINTS, np.inf)
         rec = self.reconstructor
         try:
             before = rec.checkpoint() if hasattr(rec, "checkpoint") else None
@@ -307,11 +308,12 @@ class Server:
                     r = rec.solve(markers, t)
             joints = np.asarray(r.joints, float)
             residual = float(r.residual)
+            bounds = np.asarray(r.bounds, float)
         except Exception:
             log.exception("solver failed on frame t=%.3f s (frame left unsolved)", t)
         if np.isfinite(joints).all():
             self.labeller.observe(t, self._marker_view(joints))
-        return markers, joints, residual
+        return markers, joints, residual, bounds
 
     def _frame(self, frame) -> PoseMessage:
         self.stats.frames += 1
@@ -320,6 +322,7 @@ class Server:
         t = (frame.t_ns - self._t0_ns) / 1e9
         markers, mask, quality = self.markers_for(frame, t)
         joints = np.full((N_JOINTS, 3), np.nan)
+        bounds = None
         residual, flags = float("nan"), 0
         if self.skip_seqs is not None:
             skip = self._seq in self.skip_seqs
@@ -330,7 +333,7 @@ class Server:
             self.stats.solve_skipped += 1
             flags |= FLAG_SOLVE_SKIPPED
         if self.reconstructor is not None and not skip:
-            markers, joints, residual = self.solve_markers(markers, t)  # a refit swaps names, keeps the mask
+            markers, joints, residual, bounds = self.solve_markers(markers, t)  # a refit swaps names, keeps the mask
             self._check_subject(frame.t_ns)
             if np.isfinite(joints).all():
                 flags |= FLAG_SOLVED
@@ -345,7 +348,7 @@ class Server:
         msg = PoseMessage(seq=self._seq, t_ns=frame.t_ns, joints=joints, residual_m=residual,
                           n_markers=bin(mask).count("1"), n_views=len(frame.packets), flags=flags,
                           markers=markers, marker_mask=mask, label_margin_m=quality.margin_m,
-                          label_mode=quality.mode)
+                          label_mode=quality.mode, joint_bound=bounds)
         self._seq += 1
         msg.latency_ms = (self.clock() - frame.t_ns) / 1e6
         self.stats.latency_ms.append(msg.latency_ms)

@@ -18,6 +18,7 @@ from samba_common.skeleton import MARKER_NAMES
 from samba_server.activity import MoteActivity
 from samba_server.app import add_placement_arg, build_server, load_server_configs, setup_logging
 from samba_server.process import VideoError, _open_video, process_videos
+from samba_server.recon.bounds import guessed_summary
 from samba_server.record import RecorderError
 
 log = logging.getLogger(__name__)
@@ -89,6 +90,8 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     solved = int(np.isfinite(joints).all(axis=(1, 2)).sum())
     print(f"wrote {args.out}: {len(t)} frames, {solved} solved", file=sys.stderr)
+    if solved:
+        print(guessed_summary(extra["joint_bound"], np.isfinite(joints).all(axis=(1, 2))), file=sys.stderr)
     note = getattr(server.reconstructor, "placement_note", None)
     if note:
         print(f"marker placement: {note}", file=sys.stderr)

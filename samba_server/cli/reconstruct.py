@@ -18,6 +18,7 @@ from samba_common.subject import Subject, SubjectError, load_subject
 from samba_server.export.csvfile import write_joints_csv
 from samba_server.recon import (MotionDB, ProportionError, ReconstructConfig, load_default_db, reconstruct_take,
                                 sample_path)
+from samba_server.recon.bounds import guessed_summary
 from samba_server.recon.reconstruct import Reconstructor
 from samba_server.recon.subject_fit import calibrate_subject, guess_placement
 
@@ -41,7 +42,8 @@ calibrated subject.toml.
 
 
 def summary(info: dict, n_frames: int) -> str:
-    """Human summary: frames, unsolved, bridged, mean residual, speed and the subject's bone lengths."""
+    """Human summary: frames, unsolved, bridged, mean residual, speed, the subject's bone lengths
+    and how many joints are confident (:func:`guessed_summary`)."""
     status = info["status"]
     res = info["residual"][np.isfinite(info["residual"])]
     lines = [
@@ -49,6 +51,7 @@ def summary(info: dict, n_frames: int) -> str:
         f"mean marker residual {1000 * res.mean():.1f} mm" if res.size else "mean marker residual n/a",
         f"{info['ms_per_frame']:.2f} ms/frame, {np.mean(info['iterations']):.1f} LM iterations/frame",
         "bone lengths (m): " + ", ".join(f"{n} {v:.3f}" for n, v in zip(BONE_TYPES, info["lengths"])),
+        guessed_summary(info["joint_bound"], status == "solved"),
     ]
     return "\n".join(lines)
 
@@ -122,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         if subject is None:
             subject = Subject(info["lengths"], placement="joint_centres")
         save_joints(args.out, joints, take.t, residual=info["residual"], n_markers=info["n_markers"],
-                    status=info["status"], bone_lengths=info["lengths"], bone_types=np.array(BONE_TYPES),
+                    status=info["status"], joint_bound=info["joint_bound"], bone_lengths=info["lengths"], bone_types=np.array(BONE_TYPES),
                     marker_names=np.array(MARKER_NAMES), **subject.metadata())
         if args.csv:
             write_joints_csv(args.csv, joints, take.t)

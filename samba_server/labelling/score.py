@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from samba_common.skeleton import MARKER_JOINT
+from samba_server.recon.bounds import CONFIDENT_M
 
 __all__ = ["TakeScore", "separable_visible", "score_take"]
 
@@ -28,7 +29,10 @@ class TakeScore:
     bridged across missing markers) with a joint more than 20 cm off; confident_wrong_marker: the
     same for the 8 joints that carry a marker (the solver fits those to the markers within a few
     cm, so one 20 cm off was put there by a wrong name; the other joints also carry what the
-    solver alone gets wrong);
+    solver alone gets wrong); bound_wrong: share of confident frames with a joint more than
+    20 cm off whose own bound (:mod:`samba_server.recon.bounds`) claimed it within 20 cm (a
+    *confidently* wrong joint); unsure_joints: share of the joints of confident frames whose
+    bound is 20 cm or more (drawn, but flagged as a guess);
     solved: share of frames outside blackouts with a pose; reacquire_s: per blackout, the time
     from the markers' return to the first frame with >= 6 markers named right (NaN if never);
     blackout_pose_s: the longest time into a blackout with a pose still output; mpjpe_m: mean
@@ -40,6 +44,8 @@ class TakeScore:
     wrong_frames: int = 0
     confident_wrong: float = float("nan")
     confident_wrong_marker: float = float("nan")
+    bound_wrong: float = float("nan")
+    unsure_joints: float = float("nan")
     solved: float = float("nan")
     reacquire_s: list[float] = field(default_factory=list)
     blackout_pose_s: float = 0.0
@@ -60,10 +66,12 @@ def separable_visible(uv: np.ndarray, visible: np.ndarray, radius: np.ndarray, g
 
 
 def score_take(markers: np.ndarray, joints: np.ndarray, truth_joints: np.ndarray, visible: np.ndarray,
-               blackout: np.ndarray, fps: float, n_lead: int = 0, tol_m: float = 0.08) -> TakeScore:
+               blackout: np.ndarray, fps: float, n_lead: int = 0, tol_m: float = 0.08,
+               bounds: np.ndarray | None = None) -> TakeScore:
     """Score one take. markers: (F, 8, 3) named markers (NaN = not named); joints: (F, 13, 3)
     poses (NaN = none); truth_joints: (F, 13, 3); visible: (F, 8) from :func:`separable_visible`;
-    blackout: (F,) bool; n_lead: frames of standard pose and lead-in before the motion."""
+    blackout: (F,) bool; n_lead: frames of standard pose and lead-in before the motion;
+    bounds: (F, 13) per-joint bounds (m) of the poses, or None."""
     truth = truth_joints[:, list(MARKER_JOINT)]
     named = np.isfinite(markers).all(axis=2)
     dd = np.linalg.norm(markers[:, :, None, :] - truth[:, None, :, :], axis=-1)  # (F, 8, 8)
@@ -86,6 +94,10 @@ def score_take(markers: np.ndarray, joints: np.ndarray, truth_joints: np.ndarray
         far = np.where(solved[:, None], err, 0.0) > 0.2
         s.confident_wrong = float(far.any(axis=1)[confident].mean())
         s.confident_wrong_marker = float(far[:, list(MARKER_JOINT)].any(axis=1)[confident].mean())
+        if bounds is not None:
+            sure = np.asarray(bounds, float) < CONFIDENT_M
+            s.bound_wrong = float((far & sure).any(axis=1)[confident].mean())
+            s.unsure_joints = float((~sure)[confident].mean())
     motion = solved.copy()
     motion[:n_lead] = False
     if motion.any():

@@ -11,7 +11,8 @@ Per frame (:meth:`Reconstructor.solve`):
 5. Levenberg–Marquardt on PCA prior + marker fit + temporal smoothness
    (:mod:`samba_server.recon.kernels`), started from the better of the linear least-squares start of
    the thesis and the constant-velocity prediction;
-6. joints in world coordinates with the subject's fixed bone lengths.
+6. joints in world coordinates with the subject's fixed bone lengths;
+7. a bound per joint: how far it may be from the truth (:mod:`.bounds`).
 
 Offline, :func:`reconstruct_take` first estimates the subject's proportions from the whole take.
 Live, the reconstructor estimates them from the first ``body_frames`` frames (the standard pose
@@ -23,7 +24,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -36,6 +37,7 @@ from samba_common.subject import Subject
 from .db import MotionDB, load_default_db
 from .proportions import ProportionError, estimate_lengths
 from . import kernels
+from .bounds import fresh_marker_state, joint_bounds, marker_bounds
 from .kdtree import KDTree
 from .live_subject import LiveSubjectCalibration, describe
 from .subject_model import placement_from_standard_pose
@@ -95,7 +97,8 @@ class PoseResult:
     """One solved frame. joints: (13, 3) world metres (all NaN if unsolved); residual: rms marker
     error (m) over the observed markers; n_markers: markers used; iterations: LM iterations;
     status: "solved", "bridged" or "unsolved"; state: the solved torso rotation (3, 3), shoulder
-    midpoint (3,) and bone directions (11, 3), or None."""
+    midpoint (3,) and bone directions (11, 3), or None; bounds: (13,) metres, how far each
+    joint may be from the truth (:mod:`.bounds`; inf when unsolved)."""
 
     joints: np.ndarray
     residual: float
@@ -103,6 +106,7 @@ class PoseResult:
     iterations: int
     status: str
     state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    bounds: np.ndarray = field(default_factory=lambda: np.full(N_JOINTS, np.inf))
 
 
 #: feature columns (of the 24 aligned marker coordinates) and pose-vector entries of each body
@@ -163,6 +167,9 @@ class _History:
     dirs: np.ndarray = field(default_factory=lambda: np.zeros((11, 3)))
     t_last: float = -np.inf   # time of the last solved or bridged frame
     t_seen: float = -np.inf   # time of the last frame with enough markers
+    # per marker: its joint's bound (m) and the time (s) when it was last observed
+    mb: np.ndarray = field(default_factory=lambda: fresh_marker_state()[0])
+    mt: np.ndarray = field(default_factory=lambda: fresh_marker_state()[1])
 
 
 class Reconstructor:
@@ -369,12 +376,29 @@ class Reconstructor:
         if status == 2:
             return PoseResult(q, float("nan"), int(n_seen), 0, "unsolved")
         h = self._hist
+        mbounds, h.mb, h.mt = marker_bounds(markers, mk, h.mb, h.mt, t)
+        bounds = joint_bounds(q, mbounds, self.novelty(markers, mk), self.lengths)
         h.q2, h.q1, h.n = h.q1, q, min(h.n + 1, 2)
         h.m2, h.m1 = h.m1, mk
         h.R, h.o, h.dirs, h.has_state, h.t_last = R, o, d, True, t
         if status == 0:
             h.t_seen = t
-        return PoseResult(q, float(resid), int(n_seen), int(iters), "solved" if status == 0 else "bridged", (R, o, d))
+        return PoseResult(q, float(resid), int(n_seen), int(iters), "solved" if status == 0 else "bridged", (R, o, d),
+                          bounds)
+
+    def novelty(self, markers: np.ndarray, model: np.ndarray) -> float:
+        """How unlike the database's bodies a frame's trunk and legs are: distance (m, over the
+        knee and ankle coordinates in the marker body frame and the up vector) from the
+        frame's search feature to the nearest database pose's. markers: (8, 3) observed (NaN
+        rows unobserved, taken from model (8, 3), the solve's markers). NaN when unknown."""
+        if self.index is None:
+            return float("nan")
+        filled = np.where(np.isfinite(markers), markers, model)
+        if not np.isfinite(filled).all():
+            return float("nan")
+        feature = kernels.search_feature(np.ascontiguousarray(filled), UP_WEIGHT)[2]
+        cols = PART_FEATURES[2]
+        return float(self.index.tree(cols).nearest_distance(feature[cols])[0])
 
     def _current(self, h: _History, t: float) -> _History:
         """The temporal state h if it can still predict at t s, else a fresh one (a long gap
@@ -406,7 +430,7 @@ class Reconstructor:
             return None
         h = self._hist
         return _History(h.n, h.q1.copy(), h.q2.copy(), h.m1.copy(), h.m2.copy(), h.has_state, h.R.copy(),
-                        h.o.copy(), h.dirs.copy(), h.t_last, h.t_seen)
+                        h.o.copy(), h.dirs.copy(), h.t_last, h.t_seen, h.mb.copy(), h.mt.copy())
 
     def restore(self, state: _History) -> None:
         """Go back to a :meth:`checkpoint` (to solve the frame again with other names)."""
@@ -456,7 +480,8 @@ def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarr
     their states (:func:`_merge`, bone lengths ``lengths`` (8,) m); where only the backward pass
     did, its pose; elsewhere the forward pass's (its bridges included). A backward bridge is
     never used: it would invent poses up to ``max_gap`` before the markers come back, i.e. deep
-    into a blackout, where the forward bridge is already as far as a guess may go."""
+    into a blackout, where the forward bridge is already as far as a guess may go. A merged
+    frame's joint bounds are the larger of the two passes'."""
     F = len(fwd)
     joints = np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3)
     results = list(fwd)
@@ -465,6 +490,7 @@ def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarr
             continue
         if a.status == "solved" and a.state is not None and b.state is not None:
             joints[i] = _merge(a, b, lengths)
+            results[i] = replace(a, bounds=np.maximum(a.bounds, b.bounds))
         elif a.status != "solved":
             joints[i], results[i] = b.joints, b
     return joints, results
@@ -499,7 +525,8 @@ def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = N
     live poses. offsets: (8, 3) marker offsets in segment frames (None: joint centres); the
     joints returned are joint centres either way.
     Returns joints (F, 13, 3) (NaN frames where unsolved) and an info dict with per-frame
-    ``residual`` (F,), ``n_markers`` (F,), ``iterations`` (F,), ``status`` (F,) and the
+    ``residual`` (F,), ``n_markers`` (F,), ``iterations`` (F,), ``status`` (F,), ``joint_bound``
+    (F, 13) m (how far each joint may be off, :mod:`.bounds`) and the
     ``lengths`` (8,), ``ms_per_frame`` (per solve).
     """
     db = db if db is not None else load_default_db()
@@ -520,6 +547,7 @@ def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = N
             "n_markers": np.array([r.n_markers for r in results], np.int16),
             "iterations": np.array([r.iterations for r in results], np.int16),
             "status": np.array([r.status for r in results], dtype="<U8"),
+            "joint_bound": np.array([r.bounds for r in results], float).reshape(F, N_JOINTS),
             "lengths": lengths, "ms_per_frame": 1e3 * elapsed / max(n_solves, 1),
             "offsets": np.zeros((N_MARKERS, 3)) if offsets is None else np.asarray(offsets, float)}
     return joints, info

@@ -25,9 +25,12 @@ class PoorPose:
 
 def pose_quality(pose, poor: PoorPose = PoorPose()) -> dict:
     """The quality dict the page shows for a PoseMessage: residual_m, n_markers, n_views,
-    latency_ms, solved, label_mode (lost/tracking/identified), label_margin_m, flags (names)
-    and ``poor``: the list of reasons the pose is poor (empty = good), e.g. ["markers 5/8"]."""
+    latency_ms, solved, label_mode (lost/tracking/identified), label_margin_m, flags (names),
+    ``poor``: the list of reasons the pose is poor (empty = good), e.g. ["markers 5/8"], and
+    ``unsure``: the names of the joints whose bound is 20 cm or more (drawn, but a guess)."""
     from samba_common.pose_wire import FLAG_MARKERS, FLAG_NAMES
+    from samba_common.skeleton import JOINT_NAMES
+    from samba_server.recon.bounds import CONFIDENT_M
 
     res, margin = float(pose.residual_m), float(pose.label_margin_m)
     reasons = []
@@ -41,11 +44,14 @@ def pose_quality(pose, poor: PoorPose = PoorPose()) -> dict:
         reasons.append("labels lost")
     elif np.isfinite(margin) and margin < poor.min_label_margin_m:
         reasons.append(f"ambiguous labels (margin {1000 * margin:.0f} mm)")
+    unsure = []
+    if pose.solved and pose.joint_bound is not None:
+        unsure = [JOINT_NAMES[i] for i in np.flatnonzero(~(np.asarray(pose.joint_bound) < CONFIDENT_M))]
     return {"residual_m": res, "n_markers": int(pose.n_markers), "n_views": int(pose.n_views),
             "latency_ms": float(pose.latency_ms), "solved": bool(pose.solved), "label_mode": str(pose.label_mode),
             "label_margin_m": margin,
             "flags": [n for b, n in FLAG_NAMES.items() if pose.flags & b and b != FLAG_MARKERS],
-            "poor": reasons}
+            "poor": reasons, "unsure": unsure}
 
 
 def pose_to_viewer(viewer: Viewer, pose) -> None:

@@ -15,6 +15,7 @@ def test_reconstruct_sample_take_writes_joints_and_csv(tmp_path, capsys):
     n = len(np.load(sample_path())["t"])
     assert take.joints.shape == (n, 13, 3) and np.isfinite(take.joints).all()
     assert take.extra["bone_lengths"].shape == (8,)
+    assert take.extra["joint_bound"].shape == (n, 13) and (take.extra["joint_bound"] > 0).all()
     lines = csv.read_text().splitlines()
     assert len(lines) == n + 1 and lines[0].startswith("t,head_x,head_y,head_z")
     text = capsys.readouterr().out

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from samba_common.pose_wire import (FLAG_INCOMPLETE, FLAG_MARKERS, FLAG_SOLVED, HEADER, PoseError, PoseMessage,
-                                    decode_pose, encode_pose, pose_from_json, pose_to_json)
+from samba_common.pose_wire import (FLAG_BOUNDS, FLAG_INCOMPLETE, FLAG_MARKERS, FLAG_SOLVED, HEADER, PoseError,
+                                    PoseMessage, decode_pose, encode_pose, pose_from_json, pose_to_json)
 
 
 def _pose(with_markers: bool = True) -> PoseMessage:
@@ -56,6 +56,36 @@ def test_json_round_trip_and_layout():
     np.testing.assert_allclose(q.joints, p.joints, atol=1e-6)
     np.testing.assert_allclose(q.markers, p.markers, atol=1e-6, equal_nan=True)
     assert q.flags == p.flags | FLAG_MARKERS and q.marker_mask == p.marker_mask
+
+
+@pytest.mark.parametrize("with_markers", [True, False])
+def test_joint_bounds_round_trip(with_markers):
+    """The per-joint bounds travel after the joints (and markers) in binary and JSON; an
+    unknown bound (inf) stays unknown."""
+    p = _pose(with_markers)
+    p.joint_bound = np.linspace(0.02, 0.3, 13)
+    p.joint_bound[3] = np.inf
+    buf = encode_pose(p)
+    assert len(buf) == HEADER.size + 13 * 12 + (96 if with_markers else 0) + 13 * 4
+    q = decode_pose(buf)
+    assert q.flags & FLAG_BOUNDS
+    np.testing.assert_allclose(q.joint_bound, p.joint_bound, rtol=1e-6)
+    if with_markers:
+        np.testing.assert_allclose(q.markers, p.markers, rtol=1e-6, atol=1e-6, equal_nan=True)
+    d = json.loads(pose_to_json(p))
+    assert d["joint_bound"][3] is None and d["joint_bound"][0] == pytest.approx(0.02)
+    r = pose_from_json(pose_to_json(p))
+    np.testing.assert_allclose(r.joint_bound, p.joint_bound, atol=1e-4)
+    with pytest.raises(PoseError):
+        decode_pose(buf[:-4])
+
+
+def test_version_2_pose_still_read():
+    """A recording from before the bounds (version 2) decodes, without bounds."""
+    buf = bytearray(encode_pose(_pose()))
+    buf[4] = 2
+    q = decode_pose(bytes(buf))
+    assert q.joint_bound is None and q.label_mode == "lost" and q.n_markers == 7
 
 
 @pytest.mark.parametrize("buf", [b"", b"SMBP", b"XXXX" + bytes(200), None])

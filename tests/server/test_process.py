@@ -61,6 +61,12 @@ def _run_process(tmp_path, capsys):
     np.testing.assert_array_equal(load_joints(replayed).joints, load_joints(told).joints)
     got = load_joints(out)
     assert np.load(out)["from_backward"].shape == (len(joints),)  # labelled from both ends by default
+    # every solved joint carries its bound; the markers' joints are measured, so confident
+    bound = np.load(out)["joint_bound"]
+    solved_rows = np.isfinite(load_joints(out).joints).all(axis=(1, 2))
+    assert bound.shape == (len(joints), 13) and np.isfinite(bound[solved_rows]).all()
+    assert np.median(bound[solved_rows][:, list(MARKER_JOINT)]) < 0.05
+    np.testing.assert_array_equal(np.load(replayed)["joint_bound"], np.load(told)["joint_bound"])
     assert got.joints.shape == joints.shape  # one row per video frame
     np.testing.assert_allclose(got.t, np.arange(len(joints)) / FPS)
     clean, _ = reconstruct_take(joints[:, list(MARKER_JOINT)], t)

@@ -3,7 +3,8 @@
 Unit part: :func:`pose_quality` names the reasons a pose is poor and ``Status.snapshot`` fills
 each mote's fps / blobs / drops from a real :class:`Server` fed with real packets. Browser
 part (headless Chromium, skipped without it): a take on the Unix-epoch clock shows the time
-since its first pose, and a 5-marker pose is shown as poor with its reasons.
+since its first pose, and a 5-marker pose is shown as poor with its reasons and its guessed
+joints.
 """
 
 from __future__ import annotations
@@ -30,10 +31,13 @@ from .test_browser import CHROMIUM, dump_dom
 T_UNIX = 1_795_481_354.15  # a capture clock in Unix seconds, as live motes stamp
 
 
-def _pose(n_markers=8, residual=0.004, mode="identified", margin=0.2, solved=True, seq=0, t=T_UNIX) -> PoseMessage:
+def _pose(n_markers=8, residual=0.004, mode="identified", margin=0.2, solved=True, seq=0, t=T_UNIX,
+          guessed=()) -> PoseMessage:
     j = standing_pose(seq)
+    bound = np.full(13, 0.05)
+    bound[list(guessed)] = 0.3
     return PoseMessage(seq, int(t * 1e9), j, 3.0, residual, n_markers, 4, FLAG_SOLVED if solved else 0,
-                       j[list(MARKER_JOINT)], 0xFF, margin, mode)
+                       j[list(MARKER_JOINT)], 0xFF, margin, mode, bound)
 
 
 def test_pose_quality_reasons():
@@ -46,6 +50,9 @@ def test_pose_quality_reasons():
     assert pose_quality(_pose(solved=False, n_markers=0))["poor"] == ["unsolved", "markers 0/8"]
     # the thresholds are settings
     assert pose_quality(_pose(n_markers=5), PoorPose(min_markers=4))["poor"] == []
+    # joints whose bound is 20 cm or more are named as guessed
+    assert pose_quality(_pose())["unsure"] == []
+    assert pose_quality(_pose(guessed=(3, 8)))["unsure"] == ["left_elbow", "right_hip"]
 
 
 def test_status_fills_per_mote_fps_blobs_drops():
@@ -92,7 +99,8 @@ class _TakePublisher:
         end = time.monotonic() + self.seconds
         while not self._stop.is_set() and time.monotonic() < end:
             poor = self.count >= 20
-            pose_to_viewer(self.viewer, _pose(n_markers=5 if poor else 8, seq=self.count, t=T_UNIX + self.count / self.rate))
+            pose_to_viewer(self.viewer, _pose(n_markers=5 if poor else 8, seq=self.count, t=T_UNIX + self.count / self.rate,
+                                              guessed=(3,) if poor else ()))
             if self.count % 10 == 0:
                 self.viewer.publish_status({"motes": {"cam0": {"alive": True, "fps": 59.8, "blobs": 7, "drops": 2}},
                                             "fps": 59.9, "latency_ms": 2.5, "drops": 2, "recording": False})
@@ -117,6 +125,7 @@ def test_page_shows_take_time_poor_pose_and_mote_columns(tmp_path, viewer):
     assert 'data-pose-quality="poor"' in body
     assert re.search(r'id="pose-poor">[^<]*poor pose: markers 5/8<', proc.stdout)
     assert re.search(r'id="hud" class="poor"', proc.stdout)
+    assert re.search(r'id="pose-unsure" class="dim">guessed: left elbow<', proc.stdout)
     t_shown = float(re.search(r'id="pose-t">([-\d.]+)<', proc.stdout).group(1))
     assert 0.5 < t_shown < 60.0, f"the top bar shows t = {t_shown} s, not the time since the start"
     row = re.search(r"<tr><td>cam0</td>(.*?)</tr>", proc.stdout).group(1)

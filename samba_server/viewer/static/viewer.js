@@ -9,7 +9,7 @@ const $ = (id) => document.getElementById(id);
 
 const state = {
   jointNames: [], markerNames: [], bones: [],
-  joints: null, markers: null, poses: 0, recording: false, poor: false,
+  joints: null, markers: null, poses: 0, recording: false, poor: false, unsure: new Set(),
   t: null, recStartT: null, // pose time (s) now and when the recording started
   motes: new Map(), // id -> {canvas, ctx, count, last}
   status: {},
@@ -46,6 +46,7 @@ function makeThree(cv) {
   sun.position.set(2, -3, 5);
   scene.add(sun);
   const jointMat = new THREE.MeshLambertMaterial({ color: 0xe6e6e6 });
+  const guessMat = new THREE.MeshLambertMaterial({ color: 0x6b7280, transparent: true, opacity: 0.6 });
   const markerMat = new THREE.MeshLambertMaterial({ color: 0xffb454, transparent: true, opacity: 0.55 });
   const jointGeo = new THREE.SphereGeometry(0.024, 14, 10);
   const markerGeo = new THREE.SphereGeometry(0.036, 14, 10);
@@ -57,7 +58,7 @@ function makeThree(cv) {
   const bones = new THREE.LineSegments(boneGeo, new THREE.LineBasicMaterial({ color: BONE_OK }));
   bones.frustumCulled = false;
   scene.add(bones);
-  return { renderer, scene, camera, joints, markers, bones };
+  return { renderer, scene, camera, joints, markers, bones, jointMat, guessMat };
 }
 
 const mid = (a, b) => (a && b ? [(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2] : null);
@@ -116,7 +117,10 @@ function draw() {
     r.camera.position.set(x, y, z);
     r.camera.lookAt(...state.cam.target);
     const J = state.joints || [], M = state.markers || [];
-    r.joints.forEach((m, i) => { const p = J[i]; m.visible = !!p; if (p) m.position.set(p[0], p[1], p[2]); });
+    r.joints.forEach((m, i) => {
+      const p = J[i]; m.visible = !!p; if (p) m.position.set(p[0], p[1], p[2]);
+      m.material = state.unsure.has(i) ? r.guessMat : r.jointMat;
+    });
     r.markers.forEach((m, i) => { const p = M[i]; m.visible = !!p; if (p) m.position.set(p[0], p[1], p[2]); });
     const pos = r.bones.geometry.attributes.position;
     let n = 0;
@@ -159,7 +163,7 @@ function draw2d(eye) {
     if (pa && pb) { g.beginPath(); g.moveTo(...pa); g.lineTo(...pb); g.stroke(); }
   }
   const dot = (p, rad, col) => { const q = p && proj(p); if (q) { g.fillStyle = col; g.beginPath(); g.arc(q[0], q[1], rad, 0, 7); g.fill(); } };
-  J.forEach((p) => dot(p, 5, "#e6e6e6"));
+  J.forEach((p, i) => dot(p, 5, state.unsure.has(i) ? "#6b7280" : "#e6e6e6"));
   M.forEach((p) => dot(p, 4, "#ffb454"));
 }
 
@@ -266,6 +270,11 @@ function showQuality(q) {
   $("hud").classList.toggle("poor", state.poor);
   $("pose-poor").textContent = state.poor ? "⚠ poor pose: " + reasons.join(", ") : "";
   $("pose-mode").textContent = q.label_mode ? `labels ${q.label_mode}` : "";
+  // joints whose bound is 20 cm or more: drawn grey, named in the HUD
+  const unsure = Array.isArray(q.unsure) ? q.unsure : [];
+  state.unsure = new Set(unsure.map((n) => (state.jointNames || []).indexOf(n)).filter((i) => i >= 0));
+  $("pose-unsure").textContent = unsure.length ? "guessed: " + unsure.map((n) => n.replace("_", " ")).join(", ") : "";
+  document.body.dataset.unsure = unsure.length;
   document.body.dataset.poseQuality = state.poor ? "poor" : "good";
 }
 
@@ -287,6 +296,8 @@ function connect() {
       setRecording(!!msg.recording);
     } else if (msg.type === "pose") {
       state.joints = msg.joints; state.markers = msg.markers; state.poses += 1; dirty = true;
+      const q = msg.quality || {};
+      showQuality(q);
       // throttled or headless tabs may not run animation frames: draw from the stream itself
       if (performance.now() - lastDraw > 100) { draw(); dirty = false; }
       $("pose-count").textContent = state.poses;
@@ -296,10 +307,8 @@ function connect() {
       if (state.recording && state.recStartT === null) state.recStartT = msg.t;
       $("pose-t").textContent = fmt(msg.t - (msg.t0 ?? msg.t), 2);
       if (state.recording) setRecording(true);
-      const q = msg.quality || {};
       $("pose-res").textContent = q.residual_m != null ? fmt(q.residual_m * 1000, 1) : "–";
       $("pose-nm").textContent = q.n_markers ?? msg.markers.filter((p) => p).length;
-      showQuality(q);
     } else if (msg.type === "blobs") {
       drawBlobs(msg);
     } else if (msg.type === "status") {

@@ -1,0 +1,124 @@
+"""Per-joint error bounds of a solved pose: how far each joint may be from where it is drawn.
+
+Eight markers pin the shoulders, wrists, knees and ankles; the other five joints are the
+motion database's guess. An elbow can turn about the line from its shoulder to its wrist on a
+circle whose radius grows as the arm bends; the hips can swing about the shoulders while both
+thighs still reach their knees; the head follows the spine. How well the database guesses
+depends on whether it holds bodies like this one: the distance from the frame's trunk and
+leg markers to the nearest database pose (its "novelty") says so.
+
+A joint's bound (metres) is a size its error stays under in about 95 % of frames, measured with
+the true markers on held-out subjects (each clip solved with a database without its subject;
+docs/reconstruction.md, "Per-joint bounds"):
+
+- marker joints: ``MARKER_BOUND`` plus three times the solved marker's distance from the
+  observed one; a marker not observed this frame: the bound it had when last observed plus
+  ``UNSEEN_SPEED`` per second since (inf if never observed in this solve);
+- elbows: the swivel circle's radius r times ``ELBOW_SWIVEL`` (+ half the novelty, counted up to
+  ``NOVELTY_CAP``), at least the bound of its shoulder and wrist;
+- hips: ``HIP_BASE`` + ``HIP_NOVELTY`` * novelty, at least the bound of the knees and shoulders;
+- head: ``HEAD_BASE`` + ``HEAD_NOVELTY`` * novelty, at least the shoulders' bound.
+
+A joint is *confident* when its bound is below :data:`CONFIDENT_M` (20 cm, issue 12's "wrong"):
+what a user may take as measured. The rest is drawn, but is a guess.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT, N_JOINTS, N_MARKERS
+
+#: a joint whose bound is below this (metres) is confident
+CONFIDENT_M = 0.2
+#: bound of a joint whose marker was observed and fitted exactly (m)
+MARKER_BOUND = 0.02
+#: how fast an unobserved marker's joint may have moved away from its prediction (m/s)
+UNSEEN_SPEED = 2.0
+#: elbow bound = swivel radius * (ELBOW_SWIVEL + min(novelty, NOVELTY_CAP) / 2)
+ELBOW_SWIVEL = 1.15
+NOVELTY_CAP = 0.4
+#: hip bound = HIP_BASE + HIP_NOVELTY * novelty (m)
+HIP_BASE = 0.05
+HIP_NOVELTY = 0.5
+#: head bound = HEAD_BASE + HEAD_NOVELTY * novelty (m)
+HEAD_BASE = 0.03
+HEAD_NOVELTY = 0.25
+
+_J = {n: i for i, n in enumerate(JOINT_NAMES)}
+#: (elbow, shoulder, wrist) joint indices per arm
+_ARMS = ((_J["left_elbow"], _J["left_shoulder"], _J["left_wrist"]),
+         (_J["right_elbow"], _J["right_shoulder"], _J["right_wrist"]))
+_SHOULDERS = [_J["left_shoulder"], _J["right_shoulder"]]
+_KNEES = [_J["left_knee"], _J["right_knee"]]
+_HIPS = [_J["left_hip"], _J["right_hip"]]
+_HEAD = _J["head"]
+_UPPER_ARM, _FOREARM = 4, 5  # indices into the bone lengths (8,) (BONE_TYPES order)
+
+
+def swivel_radius(shoulder: np.ndarray, wrist: np.ndarray, upper_arm: float, forearm: float) -> float:
+    """Radius (m) of the circle an elbow may lie on, given its shoulder and wrist joints (3,)
+    metres and the arm's bone lengths (m): 0 for a straight (or over-stretched) arm."""
+    d = float(np.linalg.norm(wrist - shoulder))
+    if not np.isfinite(d) or d <= 1e-9:
+        return float(upper_arm) if np.isfinite(d) else float("nan")
+    a = (upper_arm ** 2 - forearm ** 2 + d * d) / (2.0 * d)
+    return float(np.sqrt(max(upper_arm ** 2 - a * a, 0.0)))
+
+
+def joint_bounds(joints: np.ndarray, marker_bounds: np.ndarray, novelty: float, lengths: np.ndarray) -> np.ndarray:
+    """Bounds (13,) metres of solved joints (13, 3) world metres, from the bounds (8,) of the
+    marker joints (see :func:`marker_bounds`), the frame's novelty (m; NaN counts as
+    ``NOVELTY_CAP`` for the elbows and as 1 m for hips and head) and the subject's bone lengths
+    (8,) m. NaN joints get inf."""
+    out = np.full(N_JOINTS, np.inf)
+    if not np.isfinite(joints).all():
+        return out
+    nov = float(novelty) if np.isfinite(novelty) else 1.0
+    for i, j in enumerate(MARKER_JOINT):
+        out[j] = marker_bounds[i]
+    for elbow, sh, wr in _ARMS:
+        r = swivel_radius(joints[sh], joints[wr], float(lengths[_UPPER_ARM]), float(lengths[_FOREARM]))
+        out[elbow] = max(r * (ELBOW_SWIVEL + 0.5 * min(nov, NOVELTY_CAP)), out[sh], out[wr])
+    trunk = max(out[_SHOULDERS].max(), out[_KNEES].max())
+    out[_HIPS] = max(HIP_BASE + HIP_NOVELTY * nov, trunk)
+    out[_HEAD] = max(HEAD_BASE + HEAD_NOVELTY * nov, out[_SHOULDERS].max())
+    return out
+
+
+def marker_bounds(observed: np.ndarray, model: np.ndarray, last: np.ndarray, t_last: np.ndarray,
+                  t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bounds (8,) m of the marker joints of one solved frame at t s: observed (8, 3) markers
+    (NaN rows unobserved), the solve's model markers (8, 3), and per marker the bound (8,) and
+    time (8,) s when it was last observed (inf / NaN: never). Returns (bounds, last, t_last)
+    with last and t_last updated for the observed markers."""
+    seen = np.isfinite(observed).all(axis=1)
+    fit = np.linalg.norm(model - observed, axis=1)
+    last = last.copy()
+    t_last = t_last.copy()
+    last[seen] = MARKER_BOUND + 3.0 * np.where(np.isfinite(fit[seen]), fit[seen], np.inf)
+    t_last[seen] = t
+    out = last.copy()
+    gap = np.where(np.isfinite(t_last), abs(t - t_last), np.inf)
+    out[~seen] = last[~seen] + UNSEEN_SPEED * gap[~seen]
+    return out, last, t_last
+
+
+def fresh_marker_state() -> tuple[np.ndarray, np.ndarray]:
+    """(last bounds (8,), last observed times (8,)) before any frame: never observed."""
+    return np.full(N_MARKERS, np.inf), np.full(N_MARKERS, np.nan)
+
+
+def guessed_summary(bounds: np.ndarray, solved: np.ndarray) -> str:
+    """One line for a take's summary: the share of confident joints in the solved frames and
+    the joints most often guessed. bounds: (F, 13) m; solved: (F,) bool."""
+    b = np.asarray(bounds, float)[np.asarray(solved, bool)]
+    if len(b) == 0:
+        return "joint bounds: no solved frame"
+    guessed = ~(b < CONFIDENT_M)  # (n, 13)
+    share = guessed.mean(axis=0)
+    worst = [f"{JOINT_NAMES[j].replace('_', ' ')} {100 * share[j]:.0f} %" for j in np.argsort(-share)[:3]
+             if share[j] >= 0.005]
+    line = f"joints confident (bound < {100 * CONFIDENT_M:.0f} cm): {100 * (1 - guessed.mean()):.1f} % of solved joints"
+    return line + (f"; most often guessed: {', '.join(worst)}" if worst else "")
+
