@@ -459,37 +459,75 @@ def solve_frames(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, order, 
     return out
 
 
-def _merge(a: PoseResult, b: PoseResult, lengths: np.ndarray) -> np.ndarray:
+#: per limb bone (kernels' bone order), the markers (MARKER_NAMES order) that place its limb
+_LIMB_MARKERS = {3: [0, 2], 5: [0, 2], 4: [1, 3], 6: [1, 3], 7: [4, 6], 9: [4, 6], 8: [5, 7], 10: [5, 7]}
+
+
+def _merge(a: PoseResult, b: PoseResult, lengths: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
     """Joints (13, 3) of the mean of two solved states (rotations by the chordal mean, directions
-    renormalised), so the merged pose keeps the subject's bone lengths exactly."""
+    renormalised), so the merged pose keeps the subject's bone lengths exactly. w: (11,) weight
+    of a's direction of each bone (default 0.5)."""
     Ra, oa, da = a.state  # type: ignore[misc]
     Rb, ob, db = b.state  # type: ignore[misc]
     U, _s, Vt = np.linalg.svd(Ra + Rb)
     R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    d = da + db
+    w = np.full(11, 0.5) if w is None else w
+    # mean of the bones' world directions (the two passes may share a world pose yet split it
+    # differently between torso rotation and bone directions), back in the mean torso frame
+    u = w[:, None] * (da @ Ra.T) + (1.0 - w[:, None]) * (db @ Rb.T)
+    d = u @ R
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     d[2, 2] = 0.0  # the spine stays in the torso's x-y plane
     d[2] /= np.linalg.norm(d[2])
     return fk(0.5 * (oa + ob), R, d, lengths)
 
 
-def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarray
+def _gap_weights(markers: np.ndarray) -> np.ndarray:
+    """(F, 11) weight of the forward pass's direction of each bone: a limb whose markers were
+    hidden is trusted to the pass that saw them last more recently (frames since they were last
+    seen going forwards, gf, and until they are seen again, gb: weight gb / (gf + gb); 0.5 where
+    both passes see them, and for the trunk's bones)."""
+    seen = np.isfinite(markers).all(axis=2)  # (F, 8)
+    F = len(seen)
+    gf = np.full((F, 8), np.inf)
+    gb = np.full((F, 8), np.inf)
+    last = np.full(8, -np.inf)
+    for i in range(F):
+        last[seen[i]] = i
+        gf[i] = i - last
+    nxt = np.full(8, np.inf)
+    for i in range(F - 1, -1, -1):
+        nxt[seen[i]] = i
+        gb[i] = nxt - i
+    w = np.full((F, 11), 0.5)
+    for bone, ms in _LIMB_MARKERS.items():
+        f, b = gf[:, ms].max(axis=1), gb[:, ms].max(axis=1)
+        with np.errstate(invalid="ignore"):
+            wb = np.where(np.isinf(f) & np.isinf(b), 0.5, np.where(np.isinf(b), 1.0, np.where(np.isinf(f), 0.0, b / np.maximum(f + b, 1e-9))))
+        w[:, bone] = np.where((f == 0) & (b == 0), 0.5, wb)
+    return w
+
+
+def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarray, markers: np.ndarray | None = None
                  ) -> tuple[np.ndarray, list[PoseResult]]:
     """Merge a forward and a backward solve of the same F frames: ((F, 13, 3) joints, the
     PoseResult kept per frame). Where both passes solved a frame from its markers, the mean of
     their states (:func:`_merge`, bone lengths ``lengths`` (8,) m); where only the backward pass
     did, its pose; elsewhere the forward pass's (its bridges included). A backward bridge is
     never used: it would invent poses up to ``max_gap`` before the markers come back, i.e. deep
-    into a blackout, where the forward bridge is already as far as a guess may go. A merged
+    into a blackout, where the forward bridge is already as far as a guess may go. markers:
+    the (F, 8, 3) markers both passes solved (NaN = unseen), to take a hidden limb more from the
+    pass that saw it more recently (:func:`_gap_weights`; None: equal weights). A merged
     frame's joint bounds are the larger of the two passes'."""
     F = len(fwd)
     joints = np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3)
     results = list(fwd)
+    w = _gap_weights(markers) if markers is not None else np.full((F, 11), 0.5)
     for i, (a, b) in enumerate(zip(fwd, bwd)):
         if b.status != "solved":
             continue
         if a.status == "solved" and a.state is not None and b.state is not None:
-            joints[i] = _merge(a, b, lengths)
+            joints[i] = _merge(a, b, lengths, w[i])
             results[i] = replace(a, bounds=np.maximum(a.bounds, b.bounds))
         elif a.status != "solved":
             joints[i], results[i] = b.joints, b
@@ -509,7 +547,7 @@ def solve_both_ways(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, prog
         return np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3), fwd
     # time runs backwards: feed -t so the solver sees increasing times
     bwd = solve_frames(rec.again(rec.subject), markers, -np.asarray(t, float), range(F - 1, -1, -1), progress)
-    return merge_passes(fwd, bwd, rec.lengths)
+    return merge_passes(fwd, bwd, rec.lengths, markers)
 
 
 def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = None,

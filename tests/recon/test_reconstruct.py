@@ -3,11 +3,11 @@ import pytest
 
 from samba_common.body import bone_lengths, prepend_standard_pose
 from samba_common.bvh import load_bvh, resample
-from samba_common.skeleton import UNOBSERVED_JOINTS
+from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT, UNOBSERVED_JOINTS
 from samba_server.recon.db import load_default_db
 from samba_server.recon.evaluate import mpjpe, observe, vary_body
 from samba_server.recon.proportions import ProportionError, estimate_lengths
-from samba_server.recon.reconstruct import Reconstructor, reconstruct_take
+from samba_server.recon.reconstruct import PoseResult, Reconstructor, merge_passes, reconstruct_take
 
 
 @pytest.fixture(scope="module")
@@ -118,3 +118,39 @@ def test_single_frame_and_sparse_takes_keep_every_frame(held_out):
     assert np.all(np.isfinite(est[30::30])) and set(info["status"][30::30]) == {"solved"}
     assert np.all(np.isfinite(est[32::30])) and set(info["status"][32::30]) == {"bridged"}  # 67 ms away
     assert np.all(np.isnan(est[15::30])) and set(info["status"][15::30]) == {"unsolved"}    # 0.5 s away
+
+
+def _rot_z(deg: float) -> np.ndarray:
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def test_merging_two_passes_keeps_the_limbs_both_put_in_the_same_place(held_out):
+    """The two passes may turn the torso differently and still put a limb at the same place in
+    the world: the merged limb stays there (its bones are averaged as world directions, not in
+    two different torso frames)."""
+    truth, lengths, t, db, markers = held_out
+    rec = Reconstructor(db, lengths=lengths)
+    a = [rec.solve(markers[i], t[i]) for i in range(40)][-1]
+    R, o, d = a.state
+    Rb = R @ _rot_z(12.0)
+    db_ = d @ R.T @ Rb  # the same world bone directions, in b's torso frame
+    b = PoseResult(a.joints, a.residual, a.n_markers, a.iterations, "solved", (Rb, o, db_))
+    joints, _ = merge_passes([a], [b], lengths)
+    for lo, hi in (("left_elbow", "left_wrist"), ("right_knee", "right_ankle")):
+        i, j = JOINT_NAMES.index(lo), JOINT_NAMES.index(hi)
+        np.testing.assert_allclose(joints[0, j] - joints[0, i], a.joints[j] - a.joints[i], atol=1e-9)
+
+
+def test_a_hidden_wrist_is_filled_from_the_nearer_end_of_its_gap(held_out):
+    """Offline, a wrist hidden for 0.4 s is solved from both ends, each pass trusted more near
+    the end of the gap where it last saw the wrist: much nearer the truth than the live
+    (forwards) guess."""
+    truth, _lengths, t, db, markers = held_out
+    m = truth[:, list(MARKER_JOINT)].copy()
+    gap = slice(60, 72)
+    m[gap, 2] = np.nan  # left wrist
+    lw = JOINT_NAMES.index("left_wrist")
+    both = np.linalg.norm(reconstruct_take(m, t, db)[0][gap, lw] - truth[gap, lw], axis=-1).mean()
+    live = np.linalg.norm(reconstruct_take(m, t, db, both_ways=False)[0][gap, lw] - truth[gap, lw], axis=-1).mean()
+    assert both < 0.6 * live
