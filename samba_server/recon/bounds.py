@@ -12,11 +12,13 @@ the true markers on held-out subjects (each clip solved with a database without 
 docs/reconstruction.md, "Per-joint bounds"):
 
 - marker joints: ``MARKER_BOUND`` plus three times the solved marker's distance from the
-  observed one; a marker not observed this frame: the bound it had when last observed plus
-  ``UNSEEN_SPEED`` per second since (inf if never observed in this solve);
+  observed one; a marker not observed this frame: the bound it had when last observed, plus
+  ``UNSEEN_SPEED`` per second since (how far the marker may have gone), plus how far the solve
+  has put it from where it was last observed (the triangle inequality: the solver may move an
+  unseen limb anywhere); inf if never observed in this solve;
 - elbows: the swivel circle's radius r times ``ELBOW_SWIVEL`` (+ half the novelty, counted up to
   ``NOVELTY_CAP``), at least the bound of its shoulder and wrist;
-- hips: ``HIP_BASE`` + ``HIP_NOVELTY`` * novelty, at least the bound of the knees and shoulders;
+- hips: ``HIP_BASE`` + ``HIP_NOVELTY`` * novelty, at least the bound of its knee and of the shoulders;
 - head: ``HEAD_BASE`` + ``HEAD_NOVELTY`` * novelty, at least the shoulders' bound.
 
 A joint is *confident* when its bound is below :data:`CONFIDENT_M` (20 cm, issue 12's "wrong"):
@@ -80,33 +82,36 @@ def joint_bounds(joints: np.ndarray, marker_bounds: np.ndarray, novelty: float, 
     for elbow, sh, wr in _ARMS:
         r = swivel_radius(joints[sh], joints[wr], float(lengths[_UPPER_ARM]), float(lengths[_FOREARM]))
         out[elbow] = max(r * (ELBOW_SWIVEL + 0.5 * min(nov, NOVELTY_CAP)), out[sh], out[wr])
-    trunk = max(out[_SHOULDERS].max(), out[_KNEES].max())
-    out[_HIPS] = max(HIP_BASE + HIP_NOVELTY * nov, trunk)
+    for hip, knee in zip(_HIPS, _KNEES):
+        out[hip] = max(HIP_BASE + HIP_NOVELTY * nov, out[_SHOULDERS].max(), out[knee])
     out[_HEAD] = max(HEAD_BASE + HEAD_NOVELTY * nov, out[_SHOULDERS].max())
     return out
 
 
-def marker_bounds(observed: np.ndarray, model: np.ndarray, last: np.ndarray, t_last: np.ndarray,
-                  t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def marker_bounds(observed: np.ndarray, model: np.ndarray, state: tuple[np.ndarray, np.ndarray, np.ndarray],
+                  t: float) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Bounds (8,) m of the marker joints of one solved frame at t s: observed (8, 3) markers
-    (NaN rows unobserved), the solve's model markers (8, 3), and per marker the bound (8,) and
-    time (8,) s when it was last observed (inf / NaN: never). Returns (bounds, last, t_last)
-    with last and t_last updated for the observed markers."""
+    (NaN rows unobserved), the solve's model markers (8, 3), and the state of the markers'
+    last observations (:func:`fresh_marker_state`). Returns (bounds, the state updated for the
+    observed markers)."""
+    last, t_last, pos = state
     seen = np.isfinite(observed).all(axis=1)
     fit = np.linalg.norm(model - observed, axis=1)
-    last = last.copy()
-    t_last = t_last.copy()
+    last, t_last, pos = last.copy(), t_last.copy(), pos.copy()
     last[seen] = MARKER_BOUND + 3.0 * np.where(np.isfinite(fit[seen]), fit[seen], np.inf)
     t_last[seen] = t
+    pos[seen] = observed[seen]
     out = last.copy()
     gap = np.where(np.isfinite(t_last), abs(t - t_last), np.inf)
-    out[~seen] = last[~seen] + UNSEEN_SPEED * gap[~seen]
-    return out, last, t_last
+    moved = np.linalg.norm(model - pos, axis=1)
+    out[~seen] = last[~seen] + UNSEEN_SPEED * gap[~seen] + np.where(np.isfinite(moved[~seen]), moved[~seen], np.inf)
+    return out, (last, t_last, pos)
 
 
-def fresh_marker_state() -> tuple[np.ndarray, np.ndarray]:
-    """(last bounds (8,), last observed times (8,)) before any frame: never observed."""
-    return np.full(N_MARKERS, np.inf), np.full(N_MARKERS, np.nan)
+def fresh_marker_state() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The markers' last observations before any frame (never observed): their bounds (8,) m,
+    times (8,) s and positions (8, 3) m."""
+    return np.full(N_MARKERS, np.inf), np.full(N_MARKERS, np.nan), np.full((N_MARKERS, 3), np.nan)
 
 
 def guessed_summary(bounds: np.ndarray, solved: np.ndarray) -> str:

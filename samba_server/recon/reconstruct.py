@@ -167,9 +167,8 @@ class _History:
     dirs: np.ndarray = field(default_factory=lambda: np.zeros((11, 3)))
     t_last: float = -np.inf   # time of the last solved or bridged frame
     t_seen: float = -np.inf   # time of the last frame with enough markers
-    # per marker: its joint's bound (m) and the time (s) when it was last observed
-    mb: np.ndarray = field(default_factory=lambda: fresh_marker_state()[0])
-    mt: np.ndarray = field(default_factory=lambda: fresh_marker_state()[1])
+    # the markers' last observations: bounds (8,) m, times (8,) s, positions (8, 3) m
+    seen: tuple = field(default_factory=fresh_marker_state)
 
 
 class Reconstructor:
@@ -376,7 +375,7 @@ class Reconstructor:
         if status == 2:
             return PoseResult(q, float("nan"), int(n_seen), 0, "unsolved")
         h = self._hist
-        mbounds, h.mb, h.mt = marker_bounds(markers, mk, h.mb, h.mt, t)
+        mbounds, h.seen = marker_bounds(markers, mk, h.seen, t)
         bounds = joint_bounds(q, mbounds, self.novelty(markers, mk), self.lengths)
         h.q2, h.q1, h.n = h.q1, q, min(h.n + 1, 2)
         h.m2, h.m1 = h.m1, mk
@@ -430,7 +429,7 @@ class Reconstructor:
             return None
         h = self._hist
         return _History(h.n, h.q1.copy(), h.q2.copy(), h.m1.copy(), h.m2.copy(), h.has_state, h.R.copy(),
-                        h.o.copy(), h.dirs.copy(), h.t_last, h.t_seen, h.mb.copy(), h.mt.copy())
+                        h.o.copy(), h.dirs.copy(), h.t_last, h.t_seen, h.seen)
 
     def restore(self, state: _History) -> None:
         """Go back to a :meth:`checkpoint` (to solve the frame again with other names)."""

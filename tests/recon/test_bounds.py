@@ -34,20 +34,22 @@ def _take(cmu_dir, clip: str, seconds: float, seed: int):
 
 
 def test_a_hidden_wrist_is_flagged_as_it_stays_hidden(cmu_dir):
-    """Live (forwards): a wrist unseen for 0.4 s is a guess that grows by UNSEEN_SPEED; its
-    elbow follows; both are confident again once the wrist is back."""
+    """Live (forwards): a wrist unseen for 0.4 s is a guess whose bound grows by at least
+    UNSEEN_SPEED and covers the error; its elbow follows; both are confident again once the
+    wrist is back."""
     truth, t = _take(cmu_dir, "006_01", 4.0, 11)
     db = load_default_db().without(lambda n: n.startswith("006_"))
     markers = truth[:, list(MARKER_JOINT)].copy()
     gap = slice(60, 72)
     markers[gap, 2] = np.nan  # left wrist (marker 2)
-    _est, info = reconstruct_take(markers, t, db, both_ways=False)
+    est, info = reconstruct_take(markers, t, db, both_ways=False)
     b = info["joint_bound"]
     lw, le = J["left_wrist"], J["left_elbow"]
     assert b[59, lw] < 0.05
     inside = b[gap, lw]
-    assert np.all(np.diff(inside) > 0) and np.diff(inside).mean() == pytest.approx(UNSEEN_SPEED / 30.0, rel=0.05)
+    assert np.all(np.diff(inside) >= UNSEEN_SPEED / 30.0 - 1e-9)  # at least the distance it may have gone
     assert inside[-1] >= CONFIDENT_M and np.all(b[gap, le] >= inside - 1e-9)
+    assert np.all(np.linalg.norm(est[gap, lw] - truth[gap, lw], axis=-1) <= inside)  # a bound, not a guess
     assert b[72, lw] < 0.05 and b[72, J["right_wrist"]] < 0.05
 
 
