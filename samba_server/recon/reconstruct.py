@@ -459,13 +459,14 @@ def solve_frames(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, order, 
 
 
 #: per limb bone (kernels' bone order), the markers (MARKER_NAMES order) that place its limb
-_LIMB_MARKERS = {3: [0, 2], 5: [0, 2], 4: [1, 3], 6: [1, 3], 7: [4, 6], 9: [4, 6], 8: [5, 7], 10: [5, 7]}
+_LIMB_MARKERS = {kernels.LUA: [0, 2], kernels.LFA: [0, 2], kernels.RUA: [1, 3], kernels.RFA: [1, 3],
+                 kernels.LTH: [4, 6], kernels.LSH: [4, 6], kernels.RTH: [5, 7], kernels.RSH: [5, 7]}
 
 
 def _merge(a: PoseResult, b: PoseResult, lengths: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
-    """Joints (13, 3) of the mean of two solved states (rotations by the chordal mean, directions
-    renormalised), so the merged pose keeps the subject's bone lengths exactly. w: (11,) weight
-    of a's direction of each bone (default 0.5)."""
+    """Joints (13, 3) of the mean of two solved states: the torso rotations' chordal mean, and
+    each bone's world direction averaged (weight w (11,) for a's, default 0.5) and expressed in
+    that torso frame, so the merged pose keeps the subject's bone lengths exactly."""
     Ra, oa, da = a.state  # type: ignore[misc]
     Rb, ob, db = b.state  # type: ignore[misc]
     U, _s, Vt = np.linalg.svd(Ra + Rb)
@@ -500,10 +501,11 @@ def _gap_weights(markers: np.ndarray) -> np.ndarray:
         gb[i] = nxt - i
     w = np.full((F, 11), 0.5)
     for bone, ms in _LIMB_MARKERS.items():
-        f, b = gf[:, ms].max(axis=1), gb[:, ms].max(axis=1)
-        with np.errstate(invalid="ignore"):
-            wb = np.where(np.isinf(f) & np.isinf(b), 0.5, np.where(np.isinf(b), 1.0, np.where(np.isinf(f), 0.0, b / np.maximum(f + b, 1e-9))))
-        w[:, bone] = np.where((f == 0) & (b == 0), 0.5, wb)
+        f, b = gf[:, ms].max(axis=1), gb[:, ms].max(axis=1)  # 0, 0 where every marker is seen
+        gap = (f > 0) & np.isfinite(f) & np.isfinite(b)
+        w[gap, bone] = b[gap] / (f[gap] + b[gap])
+        w[np.isinf(b) & np.isfinite(f), bone] = 1.0  # never seen again: the forward pass saw it last
+        w[np.isinf(f) & np.isfinite(b), bone] = 0.0  # not seen yet: the backward pass saw it first
     return w
 
 
