@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT, N_JOINTS, N_MARKERS
+from samba_common.skeleton import BONE_TYPES, JOINT_NAMES, MARKER_JOINT, N_JOINTS, N_MARKERS
 
 #: a joint whose bound is below this (metres) is confident
 CONFIDENT_M = 0.2
@@ -55,7 +55,7 @@ _SHOULDERS = [_J["left_shoulder"], _J["right_shoulder"]]
 _KNEES = [_J["left_knee"], _J["right_knee"]]
 _HIPS = [_J["left_hip"], _J["right_hip"]]
 _HEAD = _J["head"]
-_UPPER_ARM, _FOREARM = 4, 5  # indices into the bone lengths (8,) (BONE_TYPES order)
+_UPPER_ARM, _FOREARM = BONE_TYPES.index("upper_arm"), BONE_TYPES.index("forearm")  # into the lengths (8,)
 
 
 def swivel_radius(shoulder: np.ndarray, wrist: np.ndarray, upper_arm: float, forearm: float) -> float:
