@@ -88,10 +88,11 @@ def main(argv: list[str] | None = None) -> int:
     except (VideoError, CalibrationError, ConfigError, RecorderError, OSError, ValueError) as exc:
         print(f"samba-process: {exc}", file=sys.stderr)
         return 1
-    solved = int(np.isfinite(joints).all(axis=(1, 2)).sum())
+    solved_rows = np.isfinite(joints).all(axis=(1, 2))
+    solved = int(solved_rows.sum())
     print(f"wrote {args.out}: {len(t)} frames, {solved} solved", file=sys.stderr)
     if solved:
-        print(guessed_summary(extra["joint_bound"], np.isfinite(joints).all(axis=(1, 2))), file=sys.stderr)
+        print(guessed_summary(extra["joint_bound"], solved_rows), file=sys.stderr)
     note = getattr(server.reconstructor, "placement_note", None)
     if note:
         print(f"marker placement: {note}", file=sys.stderr)

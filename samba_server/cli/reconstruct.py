@@ -125,8 +125,8 @@ def main(argv: list[str] | None = None) -> int:
         if subject is None:
             subject = Subject(info["lengths"], placement="joint_centres")
         save_joints(args.out, joints, take.t, residual=info["residual"], n_markers=info["n_markers"],
-                    status=info["status"], joint_bound=info["joint_bound"], bone_lengths=info["lengths"], bone_types=np.array(BONE_TYPES),
-                    marker_names=np.array(MARKER_NAMES), **subject.metadata())
+                    status=info["status"], joint_bound=info["joint_bound"], bone_lengths=info["lengths"],
+                    bone_types=np.array(BONE_TYPES), marker_names=np.array(MARKER_NAMES), **subject.metadata())
         if args.csv:
             write_joints_csv(args.csv, joints, take.t)
     except (FormatError, ConfigError, ProportionError, SubjectError) as exc:

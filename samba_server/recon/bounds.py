@@ -68,9 +68,9 @@ def swivel_radius(shoulder: np.ndarray, wrist: np.ndarray, upper_arm: float, for
     return float(np.sqrt(max(upper_arm ** 2 - a * a, 0.0)))
 
 
-def joint_bounds(joints: np.ndarray, marker_bounds: np.ndarray, novelty: float, lengths: np.ndarray) -> np.ndarray:
-    """Bounds (13,) metres of solved joints (13, 3) world metres, from the bounds (8,) of the
-    marker joints (see :func:`marker_bounds`), the frame's novelty (m; NaN counts as
+def joint_bounds(joints: np.ndarray, at_markers: np.ndarray, novelty: float, lengths: np.ndarray) -> np.ndarray:
+    """Bounds (13,) metres of solved joints (13, 3) world metres, from the bounds at_markers (8,)
+    of the marker joints (see :func:`marker_bounds`), the frame's novelty (m; NaN counts as
     ``NOVELTY_CAP`` for the elbows and as 1 m for hips and head) and the subject's bone lengths
     (8,) m. NaN joints get inf."""
     out = np.full(N_JOINTS, np.inf)
@@ -78,7 +78,7 @@ def joint_bounds(joints: np.ndarray, marker_bounds: np.ndarray, novelty: float, 
         return out
     nov = float(novelty) if np.isfinite(novelty) else 1.0
     for i, j in enumerate(MARKER_JOINT):
-        out[j] = marker_bounds[i]
+        out[j] = at_markers[i]
     for elbow, sh, wr in _ARMS:
         r = swivel_radius(joints[sh], joints[wr], float(lengths[_UPPER_ARM]), float(lengths[_FOREARM]))
         out[elbow] = max(r * (ELBOW_SWIVEL + 0.5 * min(nov, NOVELTY_CAP)), out[sh], out[wr])

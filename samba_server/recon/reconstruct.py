@@ -463,15 +463,14 @@ _LIMB_MARKERS = {kernels.LUA: [0, 2], kernels.LFA: [0, 2], kernels.RUA: [1, 3], 
                  kernels.LTH: [4, 6], kernels.LSH: [4, 6], kernels.RTH: [5, 7], kernels.RSH: [5, 7]}
 
 
-def _merge(a: PoseResult, b: PoseResult, lengths: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+def _merge(a: PoseResult, b: PoseResult, lengths: np.ndarray, w: np.ndarray) -> np.ndarray:
     """Joints (13, 3) of the mean of two solved states: the torso rotations' chordal mean, and
-    each bone's world direction averaged (weight w (11,) for a's, default 0.5) and expressed in
-    that torso frame, so the merged pose keeps the subject's bone lengths exactly."""
+    each bone's world direction averaged (weight w (11,) for a's) and expressed in that torso
+    frame, so the merged pose keeps the subject's bone lengths exactly."""
     Ra, oa, da = a.state  # type: ignore[misc]
     Rb, ob, db = b.state  # type: ignore[misc]
     U, _s, Vt = np.linalg.svd(Ra + Rb)
     R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
-    w = np.full(11, 0.5) if w is None else w
     # mean of the bones' world directions (the two passes may share a world pose yet split it
     # differently between torso rotation and bone directions), back in the mean torso frame
     u = w[:, None] * (da @ Ra.T) + (1.0 - w[:, None]) * (db @ Rb.T)
@@ -482,24 +481,25 @@ def _merge(a: PoseResult, b: PoseResult, lengths: np.ndarray, w: np.ndarray | No
     return fk(0.5 * (oa + ob), R, d, lengths)
 
 
+def _frames_since(seen: np.ndarray) -> np.ndarray:
+    """(F, 8) frames since each marker was last seen (0 where seen, inf before its first), from
+    seen (F, 8) bool."""
+    out = np.empty(seen.shape)
+    last = np.full(seen.shape[1], -np.inf)
+    for i, row in enumerate(seen):
+        last[row] = i
+        out[i] = i - last
+    return out
+
+
 def _gap_weights(markers: np.ndarray) -> np.ndarray:
     """(F, 11) weight of the forward pass's direction of each bone: a limb whose markers were
     hidden is trusted to the pass that saw them last more recently (frames since they were last
     seen going forwards, gf, and until they are seen again, gb: weight gb / (gf + gb); 0.5 where
     both passes see them, and for the trunk's bones)."""
     seen = np.isfinite(markers).all(axis=2)  # (F, 8)
-    F = len(seen)
-    gf = np.full((F, 8), np.inf)
-    gb = np.full((F, 8), np.inf)
-    last = np.full(8, -np.inf)
-    for i in range(F):
-        last[seen[i]] = i
-        gf[i] = i - last
-    nxt = np.full(8, np.inf)
-    for i in range(F - 1, -1, -1):
-        nxt[seen[i]] = i
-        gb[i] = nxt - i
-    w = np.full((F, 11), 0.5)
+    gf, gb = _frames_since(seen), _frames_since(seen[::-1])[::-1]
+    w = np.full((len(seen), 11), 0.5)
     for bone, ms in _LIMB_MARKERS.items():
         f, b = gf[:, ms].max(axis=1), gb[:, ms].max(axis=1)  # 0, 0 where every marker is seen
         gap = (f > 0) & np.isfinite(f) & np.isfinite(b)
