@@ -82,6 +82,9 @@ class LabelConfig:
     reach_fit_m: float = 0.03  #: ... and swapped both are this far within it
     shin_swap_min: float = 0.5  #: a leg pair is swapped when that mends a broken shin and the other shin is broken by at least this share of the tolerance (inf: never) ...
     shin_mend_max: float = 0.5  #: ... or when one shin is broken and the swap fits both within this share of it (0: never)
+    cross_gain_m: float = 0.04  #: legs named side by side whose shins fit this much better (m, both summed) with the feet crossed ...
+    cross_fit: float = 0.5  #: ... both within this share of the tolerance ...
+    cross_s: float = 0.25  #: ... for this long are named crossed (inf: never)
     fit_swap_ratio: float = 0.6  #: names swapped when that brings the 8 markers this much nearer (ratio) a database pose ...
     fit_swap_s: float = 0.05  #: ... the same swap at every check for this long (inf: never) ...
     fit_interval: float = 0.05  #: ... checked this often (s; 0: every frame)
@@ -188,6 +191,7 @@ class Labeller:
         self._shared = np.zeros(N_MARKERS, bool)
         self._views: list = []  # this frame's blobs per camera (ViewBlobs)
         self._knees_crossed_since: float | None = None
+        self._cross_since: float | None = None  # since when the shins fit clearly better crossed
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
         self._fit_swap: tuple[int, float] | None = None  # (row of _FIT_SWAPS, since when) that makes the names fit a body better
         self._t_fit = -np.inf  # last database-fit check
@@ -279,6 +283,7 @@ class Labeller:
     def _reset_timers(self) -> None:
         """Forget what the swap rules saw held over time: it was about the names before."""
         self._knees_crossed_since = None
+        self._cross_since = None
         self._arm_swap_since = [None, None]
         self._fit_swap = None
         self._refit = None
@@ -448,6 +453,7 @@ class Labeller:
         self._split_shared(out, assign, pts, pred, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
         self._swap_for_shins(out, assign, arow, right)
+        self._cross_for_shins(out, assign, arow, right, t)
         self._swap_arms(out, assign, arow, t)
         self._wrists_by_reach(out, assign, arow)
         # rigid distances and facing: drop the worse-predicted marker of a violating group
@@ -753,6 +759,33 @@ class Labeller:
         log.debug("t=%.3f s: %s swapped: %s, swapped both fit", self._t_frame, pair,
                   "both shins broken" if both_broken else "one shin broken")
         self._swap([pair], out, assign, arow)
+
+    def _cross_for_shins(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray | None,
+                         t: float) -> None:
+        """Legs named on four points of their own whose shins (knee-ankle distances) fit
+        ``cross_gain_m`` better with the ankles' names swapped, both within ``cross_fit`` of the
+        tolerance, for ``cross_s``: the feet are crossed and were named side by side. Nothing
+        else crosses names: the identification and the skeleton's prediction both put the left
+        foot on the left, and a dancer holding a pose on one foot with the other raised across it
+        (knees apart, feet 30 cm apart the other way round) kept her ankles named the wrong way
+        round for 3.5 s, tight fits that no bound flags. The knees keep their order (thighs
+        hardly cross, feet often do), unless they are named crossed: then they swap. out (8, 3),
+        assign, arow (8,) in place."""
+        legs = [LK, RK, LA, RA]
+        holds = False
+        if right is not None and (assign[legs] >= 0).all() and len(set(assign[legs].tolist())) == 4:
+            body = self._body
+            swapped = out.copy()
+            swapped[[LA, RA]] = out[[RA, LA]]
+            fit = max(body.shin_error(swapped[k], swapped[a]) for _s, _w, k, a in SIDES)
+            holds = fit <= self.config.cross_fit * body.tol and \
+                body.shin_misfit(out) - body.shin_misfit(swapped) >= self.config.cross_gain_m
+        since = self._cross_since = _held_since(self._cross_since, holds, t)
+        if since is not None and t - since >= self.config.cross_s:
+            pair = (LK, RK) if float((out[RK] - out[LK]) @ right) < 0 else (LA, RA)
+            log.debug("t=%.3f s: %s swapped: the shins fit %.2f s better crossed", t, pair, t - since)
+            self._cross_since = None
+            self._swap([pair], out, assign, arow)
 
     def _swap_arms(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, t: float) -> None:
         """A hand that rested on its shoulder (one merged point) parts from it with the names the
