@@ -630,7 +630,7 @@ def test_feet_held_crossed_but_named_side_by_side_are_named_crossed(rule):
     on a held-out dance: 3.5 s named the wrong way round, a joint 30 cm off, tight fits no bound
     flags). The ankles' names are swapped mid-hold: nothing looks crossed and both shins stay
     within the tolerance, so no other rule sees it; only the shins fitting clearly better the
-    other way round tell. Right again within 0.4 s with the rule; wrong to the end without it."""
+    other way round tell. Right again within 0.25 s with the rule; wrong to the end without it."""
     from samba_server.labelling.rigid import LA, LK, RA, RK
 
     rig = default_rig(4)
@@ -648,7 +648,7 @@ def test_feet_held_crossed_but_named_side_by_side_are_named_crossed(rule):
     right = _right(named, truth).all(axis=1)
     assert right[:70].all()
     if rule:
-        assert right[int(70 + 0.4 * FPS):].all()
+        assert right[int(70 + 0.25 * FPS):].all()
     else:
         assert not right[72:].any()
 
