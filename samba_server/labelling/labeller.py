@@ -105,6 +105,7 @@ class LabelConfig:
     audit_agree: float = 0.3  #: score, per marker, of agreeing with a tracked name in that identification
     audit_extend_margin: float = 0.5  #: an identification that only adds names to the tracked ones needs this much more
     audit_move_margin: float = 2.0  #: ... and one that moves >= 2 tracked names to other points, naming < 2 more, this much
+    audit_shoulder_s: float = 0.05  #: tracked names lacking a shoulder are audited only once it has been unnamed this long
     facing_weight: float = 3.0  #: weight of the known facing when identifying ...
     facing_decay: float = 1.0  #: ... decaying with this time constant since it was known ...
     facing_turn_rate: float = 1.5  #: ... and free within this many rad/s since then (at most 90 degrees)
@@ -988,6 +989,12 @@ class Labeller:
         self._free_hist = [h for h in self._free_hist if t - h[0] <= 1.0] + [(t, pts.X[free])]
         if not math.isfinite(cfg.audit_interval) or t - self._t_audit < cfg.audit_interval or \
                 len(pts) < cfg.min_points or not self._moving(pts.X[free], t).any():
+            return None
+        shoulder_lost = [t - self._seen[s] for s in (LS, RS) if assign[s] < 0]
+        if shoulder_lost and min(shoulder_lost) < cfg.audit_shoulder_s:
+            # a shoulder unnamed for a frame or two (its point missing: a raised hand's blob
+            # over it made a ghost instead) comes back to tracking; identified afresh on that
+            # frame's points, the names shifted onto the ghost and stayed wrong for 0.4 s
             return None
         self._t_audit = t
         self.stats.audits += 1
