@@ -1060,9 +1060,13 @@ class Labeller:
                       right: np.ndarray | None) -> None:
         """Markers named to the same (merged) point: place them either side of it, by the guess
         of :func:`_guess_split`, or (opt-in, ``split_sigma_px``) by their separation measured
-        from the merged blobs' moments (:meth:`_measured_split`, that guess as its prior). out
-        (8, 3) in place; assign (8,) point per marker (-1: none); pred (8, 3) the markers'
-        predictions; right (3,) the subject's right or None."""
+        from the merged blobs' moments (:meth:`_measured_split`, that guess as its prior). Two
+        wrists (hands together) are split along their tracks' predictions, which carry the
+        hands' last separation and motion (one above the other on a sword hilt, crossing over
+        each other in a dance), and along the subject's right only when those coincide: the
+        names the hands part with come from this split. out (8, 3) in place; assign (8,) point
+        per marker (-1: none); pred (8, 3) the markers' predictions; right (3,) the subject's
+        right or None."""
         cfg = self.config
         named = np.unique(assign[assign >= 0])
         for p in named:
@@ -1070,35 +1074,16 @@ class Labeller:
             if len(ms) != 2:
                 continue
             m, n = ms
-            off = _guess_split(pred, m, n, cfg.merged_half_m, right)
+            off = _guess_split(pred, m, n, cfg.merged_half_m, None if (m, n) == (LW, RW) else right)
+            if off is None and (m, n) == (LW, RW):
+                off = _guess_split(pred, m, n, cfg.merged_half_m, right)
             if off is None:  # no way to tell which end is which: both stay on the point
                 continue
-            if (m, n) == (LW, RW) and right is not None:
-                off = self._wrists_split(out, pred, off, _guess_split(pred, m, n, cfg.merged_half_m, None))
             measured = self._measured_split(pts, int(p), 2.0 * off, named)
             if measured is not None:
                 off = 0.5 * measured
             out[m] = out[m] + off
             out[n] = out[n] - off
-
-    def _wrists_split(self, out: np.ndarray, pred: np.ndarray, lateral: np.ndarray,
-                      tracked: np.ndarray | None) -> np.ndarray:
-        """Two wrists on one point (hands together): the left one's half separation (3,) m,
-        either along the subject's right (``lateral``: hands side by side, as in a clap) or
-        along their tracks' predictions (``tracked``: one hand above the other on a hilt),
-        whichever puts the eight markers nearer a body of the motion database (``pose_fit``;
-        unnamed markers at their predictions). out, pred (8, 3)."""
-        if tracked is None or self.pose_fit is None:
-            return lateral
-        base = np.where(np.isfinite(out).all(axis=1)[:, None], out, pred)
-        if not np.isfinite(base).all():
-            return lateral
-        cand = np.repeat(base[None], 2, axis=0)
-        for i, off in enumerate((lateral, tracked)):
-            cand[i, LW] += off
-            cand[i, RW] -= off
-        dist = self.pose_fit(cand)
-        return tracked if float(dist[1]) < float(dist[0]) else lateral
 
     def _measured_split(self, pts: Points3D, p: int, prior: np.ndarray, named: np.ndarray) -> np.ndarray | None:
         """The separation (3,) m of the two markers of point p from the moments of its merged
