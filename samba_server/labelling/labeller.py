@@ -770,11 +770,13 @@ class Labeller:
         foot on the left, and a dancer holding a pose on one foot with the other raised across it
         (knees apart, feet 30 cm apart the other way round) kept her ankles named the wrong way
         round for 3.5 s, tight fits that no bound flags. The knees keep their order (thighs
-        hardly cross, feet often do), unless they are named crossed: then they swap. out (8, 3),
-        assign, arow (8,) in place."""
+        hardly cross, feet often do), unless they are named crossed: then they swap. Three
+        cameras or more (with two, ghost points break shins as often). out (8, 3), assign, arow
+        (8,) in place."""
         legs = [LK, RK, LA, RA]
         holds = False
-        if right is not None and (assign[legs] >= 0).all() and len(set(assign[legs].tolist())) == 4:
+        if right is not None and len(self.rig) >= 3 and (assign[legs] >= 0).all() \
+                and len(set(assign[legs].tolist())) == 4:
             body = self._body
             swapped = out.copy()
             swapped[[LA, RA]] = out[[RA, LA]]
@@ -1064,9 +1066,10 @@ class Labeller:
         wrists (hands together) are split along their tracks' predictions, which carry the
         hands' last separation and motion (one above the other on a sword hilt, crossing over
         each other in a dance), and along the subject's right only when those coincide: the
-        names the hands part with come from this split. out (8, 3) in place; assign (8,) point
-        per marker (-1: none); pred (8, 3) the markers' predictions; right (3,) the subject's
-        right or None."""
+        names the hands part with come from this split. With two cameras the wrists' tracks are
+        too often on ghosts: :meth:`_wrists_split` chooses. out (8, 3) in place; assign (8,)
+        point per marker (-1: none); pred (8, 3) the markers' predictions; right (3,) the
+        subject's right or None."""
         cfg = self.config
         named = np.unique(assign[assign >= 0])
         for p in named:
@@ -1074,9 +1077,11 @@ class Labeller:
             if len(ms) != 2:
                 continue
             m, n = ms
-            off = _guess_split(pred, m, n, cfg.merged_half_m, None if (m, n) == (LW, RW) else right)
-            if off is None and (m, n) == (LW, RW):
-                off = _guess_split(pred, m, n, cfg.merged_half_m, right)
+            wrists = (m, n) == (LW, RW)
+            off = _guess_split(pred, m, n, cfg.merged_half_m, None if wrists else right)
+            if wrists and (off is None or len(self.rig) < 3):
+                lateral = _guess_split(pred, m, n, cfg.merged_half_m, right)
+                off = lateral if off is None or lateral is None else self._wrists_split(out, pred, lateral, off)
             if off is None:  # no way to tell which end is which: both stay on the point
                 continue
             measured = self._measured_split(pts, int(p), 2.0 * off, named)
@@ -1084,6 +1089,24 @@ class Labeller:
                 off = 0.5 * measured
             out[m] = out[m] + off
             out[n] = out[n] - off
+
+    def _wrists_split(self, out: np.ndarray, pred: np.ndarray, lateral: np.ndarray,
+                      tracked: np.ndarray) -> np.ndarray:
+        """Two wrists on one point (hands together), two cameras: the left one's half separation
+        (3,) m, either along the subject's right (``lateral``: hands side by side, as in a clap)
+        or along their tracks' predictions (``tracked``: one hand above the other on a hilt),
+        whichever puts the eight markers nearer a body of the motion database (``pose_fit``;
+        unnamed markers at their predictions; along the subject's right without one). out, pred
+        (8, 3)."""
+        base = np.where(np.isfinite(out).all(axis=1)[:, None], out, pred)
+        if self.pose_fit is None or not np.isfinite(base).all():
+            return lateral
+        cand = np.repeat(base[None], 2, axis=0)
+        for i, off in enumerate((lateral, tracked)):
+            cand[i, LW] += off
+            cand[i, RW] -= off
+        dist = self.pose_fit(cand)
+        return tracked if float(dist[1]) < float(dist[0]) else lateral
 
     def _measured_split(self, pts: Points3D, p: int, prior: np.ndarray, named: np.ndarray) -> np.ndarray | None:
         """The separation (3,) m of the two markers of point p from the moments of its merged
