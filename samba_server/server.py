@@ -291,8 +291,8 @@ class Server:
         """Solve the named markers (8, 3) of the frame at t s: ((8, 3) markers, (13, 3) joints,
         NaN if unsolved; residual m; (13,) joint bounds m, inf if unsolved). Names the solver
         cannot fit go back to the labelling (:meth:`Labeller.refit`), which may swap them: the
-        frame is then solved again with the new names, which are returned. A solved pose feeds the labelling's predictions; a
-        solver error is logged and leaves the frame unsolved."""
+        frame is then solved again with the new names, which are returned. A solved pose feeds
+        the labelling's predictions; a solver error is logged and leaves the frame unsolved."""
         joints, residual = np.full((N_JOINTS, 3), np.nan), float("nan")
         bounds = np.full(N_JOINTS, np.inf)
         rec = self.reconstructor

@@ -747,16 +747,15 @@ class Labeller:
         if right is None or (assign[legs] < 0).any() or len(set(assign[legs].tolist())) < 4:
             return
         body = self._body
-        shins = ((LK, LA), (RK, RA))
-        errs = sorted(body.shin_error(out[k], out[a]) for k, a in shins)
-        mended = [body.shin_error(out[k], out[a]) for k, a in ((LK, RA), (RK, LA))]
+        named, mended = _shin_errors(body, out)
+        errs = sorted(named)
         both_broken = errs[0] > self.config.shin_swap_min * body.tol and max(mended) <= body.tol
         # one broken shin mended: with two cameras a ghost point breaks a shin as often (a
         # hip-width 2-camera dance fell 42 -> 17 %), so it needs three
         one_mended = len(self.rig) >= 3 and max(mended) <= self.config.shin_mend_max * body.tol
         if errs[1] <= body.tol or not (both_broken or one_mended):
             return
-        pair = (LK, RK) if float((out[RK] - out[LK]) @ right) < 0 else (LA, RA)
+        pair = _swapped_pair(out, right)
         log.debug("t=%.3f s: %s swapped: %s, swapped both fit", self._t_frame, pair,
                   "both shins broken" if both_broken else "one shin broken")
         self._swap([pair], out, assign, arow)
@@ -777,15 +776,12 @@ class Labeller:
         holds = False
         if right is not None and len(self.rig) >= 3 and (assign[legs] >= 0).all() \
                 and len(set(assign[legs].tolist())) == 4:
-            body = self._body
-            swapped = out.copy()
-            swapped[[LA, RA]] = out[[RA, LA]]
-            fit = max(body.shin_error(swapped[k], swapped[a]) for _s, _w, k, a in SIDES)
-            holds = fit <= self.config.cross_fit * body.tol and \
-                body.shin_misfit(out) - body.shin_misfit(swapped) >= self.config.cross_gain_m
+            named, crossed = _shin_errors(self._body, out)
+            holds = max(crossed) <= self.config.cross_fit * self._body.tol and \
+                sum(named) - sum(crossed) >= self.config.cross_gain_m
         since = self._cross_since = _held_since(self._cross_since, holds, t)
         if since is not None and t - since >= self.config.cross_s:
-            pair = (LK, RK) if float((out[RK] - out[LK]) @ right) < 0 else (LA, RA)
+            pair = _swapped_pair(out, right)
             log.debug("t=%.3f s: %s swapped: the shins fit %.2f s better crossed", t, pair, t - since)
             self._cross_since = None
             self._swap([pair], out, assign, arow)
@@ -1083,7 +1079,8 @@ class Labeller:
             off = _guess_split(pred, m, n, cfg.merged_half_m, None if wrists else right)
             if wrists and (off is None or len(self.rig) < 3):
                 lateral = _guess_split(pred, m, n, cfg.merged_half_m, right)
-                off = lateral if off is None or lateral is None else self._wrists_split(out, pred, lateral, off)
+                # (with right None the two guesses are one: lateral is None only when off is)
+                off = lateral if off is None else self._wrists_split(out, pred, lateral, off)
             if off is None:  # no way to tell which end is which: both stay on the point
                 continue
             measured = self._measured_split(pts, int(p), 2.0 * off, named)
@@ -1263,6 +1260,20 @@ def _held_since(since: float | None, holds: bool, t: float) -> float | None:
     if not holds:
         return None
     return t if since is None else since
+
+
+def _shin_errors(body: Body, out: np.ndarray) -> tuple[list[float], list[float]]:
+    """How far (m) the two knee-ankle distances of out (8, 3) are from the shin, as named (left,
+    right leg) and with the ankles' names swapped (left knee to right ankle, right knee to left)."""
+    return ([body.shin_error(out[LK], out[LA]), body.shin_error(out[RK], out[RA])],
+            [body.shin_error(out[LK], out[RA]), body.shin_error(out[RK], out[LA])])
+
+
+def _swapped_pair(out: np.ndarray, right: np.ndarray) -> tuple[int, int]:
+    """Which pair to swap when the legs' shins fit better the other way round: swapping the
+    knees or the ankles makes the same two shins, so the knees' order along the subject's right
+    (3,) chooses: knees named crossed are the wrong pair (thighs hardly cross), else the ankles."""
+    return (LK, RK) if float((out[RK] - out[LK]) @ right) < 0 else (LA, RA)
 
 
 def _name_points(assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray, markers, points) -> None:
