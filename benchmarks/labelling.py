@@ -134,7 +134,7 @@ def main() -> int:
             joints, t, _fps = load_motion(data / f"{clip}.bvh", args.start, args.seconds)
         except ValueError:  # --start beyond the clip's end
             t, _fps = np.zeros(0), 1.0
-        if len(t) / _fps < MIN_PART_S:
+        if args.start and len(t) / _fps < MIN_PART_S:
             print(f"{clip}: skipped, {len(t) / _fps:.1f} s of motion from {args.start:g} s (< {MIN_PART_S:g} s)")
             continue
         subject = clip.split("_")[0]

@@ -31,7 +31,7 @@ import numpy as np
 from samba_common.align import batch_frames
 from samba_common.body import fk, standard_pose
 from samba_common.markerset import OFFSET_SIGMA, TYPICAL_OFFSETS, body_markers, markers_from_joints
-from samba_common.skeleton import BONE_TYPES, N_JOINTS, N_MARKERS
+from samba_common.skeleton import BONE_TYPES, MARKER_JOINT, N_JOINTS, N_MARKERS
 from samba_common.subject import Subject
 
 from .db import MotionDB, load_default_db
@@ -509,6 +509,43 @@ def _gap_weights(markers: np.ndarray) -> np.ndarray:
     return w
 
 
+#: a merged pose whose marker joints lie this much (m) farther from the observed markers than
+#: one pass's is not used (the bone directions' mean of two elbow swivels misses a wrist by 2-5
+#: cm: kept, it halves the elbow's error; 2 cm made more hidden joints > 20 cm off on dribbles)
+MERGE_FIT_M = 0.05
+
+
+def _marker_misfit(joints: np.ndarray, markers: np.ndarray) -> float:
+    """Largest distance (m) between the marker-carrying joints of joints (13, 3) and the
+    observed markers (8, 3) (NaN rows unobserved); 0 when none is observed."""
+    e = np.linalg.norm(joints[list(MARKER_JOINT)] - markers, axis=1)
+    e = e[np.isfinite(e)]
+    return float(e.max()) if e.size else 0.0
+
+
+def _fitting(merged: np.ndarray, ja: np.ndarray, jb: np.ndarray, markers: np.ndarray) -> np.ndarray:
+    """The merged pose (13, 3), or the pass's pose (ja or jb, 13, 3) that fits the observed
+    markers (8, 3) better when the merge moved a marker joint ``MERGE_FIT_M`` farther off than
+    that pass had it. Two passes that fit the same markers but split the pose differently
+    (the hips of a climber 30 cm apart) average to directions that fit neither: a knee 18 cm
+    from its marker, under the 3 cm bound each pass gave it. markers may be skin landmarks:
+    the joints' offsets from them largely cancel in the comparison."""
+    fa, fb = _marker_misfit(ja, markers), _marker_misfit(jb, markers)
+    if _marker_misfit(merged, markers) <= min(fa, fb) + MERGE_FIT_M:
+        return merged
+    return ja if fa <= fb else jb
+
+
+def _bounds_at(joints: np.ndarray, a: PoseResult, b: PoseResult) -> np.ndarray:
+    """Bounds (13,) m of joints (13, 3) made from two solved passes a and b: either pass's
+    bound plus how far the joint is from that pass's (the truth within a pass's bound of its
+    joint is within that much more of this one), the larger of the two (either pass may be
+    the one whose bound fails)."""
+    da = np.linalg.norm(joints - a.joints, axis=1)
+    db = np.linalg.norm(joints - b.joints, axis=1)
+    return np.maximum(a.bounds + da, b.bounds + db)
+
+
 def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarray, markers: np.ndarray | None = None
                  ) -> tuple[np.ndarray, list[PoseResult]]:
     """Merge a forward and a backward solve of the same F frames: ((F, 13, 3) joints, the
@@ -518,8 +555,9 @@ def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarr
     never used: it would invent poses up to ``max_gap`` before the markers come back, i.e. deep
     into a blackout, where the forward bridge is already as far as a guess may go. markers:
     the (F, 8, 3) markers both passes solved (NaN = unseen), to take a hidden limb more from the
-    pass that saw it more recently (:func:`_gap_weights`; None: equal weights). A merged
-    frame's joint bounds are the larger of the two passes'."""
+    pass that saw it more recently (:func:`_gap_weights`; None: equal weights) and to keep a
+    pass's pose where the merge fits them worse (:func:`_fitting`). A merged frame's joint
+    bounds cover both passes' (:func:`_bounds_at`)."""
     F = len(fwd)
     joints = np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3)
     results = list(fwd)
@@ -528,8 +566,11 @@ def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarr
         if b.status != "solved":
             continue
         if a.status == "solved" and a.state is not None and b.state is not None:
-            joints[i] = _merge(a, b, lengths, w[i])
-            results[i] = replace(a, bounds=np.maximum(a.bounds, b.bounds))
+            merged = _merge(a, b, lengths, w[i])
+            if markers is not None:
+                merged = _fitting(merged, a.joints, b.joints, markers[i])
+            joints[i] = merged
+            results[i] = replace(a, bounds=_bounds_at(merged, a, b))
         elif a.status != "solved":
             joints[i], results[i] = b.joints, b
     return joints, results
