@@ -133,6 +133,8 @@ def main() -> int:
         try:
             joints, t, _fps = load_motion(data / f"{clip}.bvh", args.start, args.seconds)
         except ValueError:  # --start beyond the clip's end
+            if not args.start:
+                raise
             t, _fps = np.zeros(0), 1.0
         if args.start and len(t) / _fps < MIN_PART_S:
             print(f"{clip}: skipped, {len(t) / _fps:.1f} s of motion from {args.start:g} s (< {MIN_PART_S:g} s)")
@@ -178,6 +180,9 @@ def main() -> int:
                         f"{s.blackout_pose_s:.2f} | {100 * s.mpjpe_m:.2f} | {100 * ref:.2f} | {ms:.1f} |")
             print(rows[-1], flush=True)
             agg[(n_cam, kind)].append((s, ref, ref_far, s_live, ref_sure))
+    if not rows:
+        print(f"no clip has {MIN_PART_S:g} s of motion from {args.start:g} s", file=sys.stderr)
+        return 1
     summary = []
     for (n_cam, kind), items in agg.items():
         if not items:
