@@ -31,7 +31,7 @@ import numpy as np
 from samba_common.align import batch_frames
 from samba_common.body import fk, standard_pose
 from samba_common.markerset import OFFSET_SIGMA, TYPICAL_OFFSETS, body_markers, markers_from_joints
-from samba_common.skeleton import BONE_TYPES, MARKER_JOINT, N_JOINTS, N_MARKERS
+from samba_common.skeleton import BONE_TYPES, N_JOINTS, N_MARKERS
 from samba_common.subject import Subject
 
 from .db import MotionDB, load_default_db
@@ -515,23 +515,25 @@ def _gap_weights(markers: np.ndarray) -> np.ndarray:
 MERGE_FIT_M = 0.05
 
 
-def _marker_misfit(joints: np.ndarray, markers: np.ndarray) -> float:
-    """Largest distance (m) between the marker-carrying joints of joints (13, 3) and the
-    observed markers (8, 3) (NaN rows unobserved); 0 when none is observed."""
-    e = np.linalg.norm(joints[list(MARKER_JOINT)] - markers, axis=1)
+def _marker_misfit(joints: np.ndarray, markers: np.ndarray, offsets: np.ndarray | None) -> float:
+    """Largest distance (m) between the model markers of joints (13, 3) (the joint centres plus
+    the subject's offsets (8, 3), None = joint centres) and the observed markers (8, 3) (NaN rows
+    unobserved); 0 when none is observed."""
+    e = np.linalg.norm(markers_from_joints(joints[None], offsets)[0] - markers, axis=1)
     e = e[np.isfinite(e)]
     return float(e.max()) if e.size else 0.0
 
 
-def _fitting(merged: np.ndarray, ja: np.ndarray, jb: np.ndarray, markers: np.ndarray) -> np.ndarray:
+def _fitting(merged: np.ndarray, ja: np.ndarray, jb: np.ndarray, markers: np.ndarray,
+             offsets: np.ndarray | None) -> np.ndarray:
     """The merged pose (13, 3), or the pass's pose (ja or jb, 13, 3) that fits the observed
-    markers (8, 3) better when the merge moved a marker joint ``MERGE_FIT_M`` farther off than
-    that pass had it. Two passes that fit the same markers but split the pose differently
-    (the hips of a climber 30 cm apart) average to directions that fit neither: a knee 18 cm
-    from its marker, under the 3 cm bound each pass gave it. markers may be skin landmarks:
-    the joints' offsets from them largely cancel in the comparison."""
-    fa, fb = _marker_misfit(ja, markers), _marker_misfit(jb, markers)
-    if _marker_misfit(merged, markers) <= min(fa, fb) + MERGE_FIT_M:
+    markers (8, 3) better when the merge moved a model marker (offsets: see
+    :func:`_marker_misfit`) ``MERGE_FIT_M`` farther off than that pass had it. Two passes that
+    fit the same markers but split the pose differently (the hips of a climber 30 cm apart)
+    average to directions that fit neither: a knee 18 cm from its marker, under the 3 cm bound
+    each pass gave it."""
+    fa, fb = _marker_misfit(ja, markers, offsets), _marker_misfit(jb, markers, offsets)
+    if _marker_misfit(merged, markers, offsets) <= min(fa, fb) + MERGE_FIT_M:
         return merged
     return ja if fa <= fb else jb
 
@@ -546,8 +548,8 @@ def _bounds_at(joints: np.ndarray, a: PoseResult, b: PoseResult) -> np.ndarray:
     return np.maximum(a.bounds + da, b.bounds + db)
 
 
-def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarray, markers: np.ndarray | None = None
-                 ) -> tuple[np.ndarray, list[PoseResult]]:
+def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarray, markers: np.ndarray | None = None,
+                 offsets: np.ndarray | None = None) -> tuple[np.ndarray, list[PoseResult]]:
     """Merge a forward and a backward solve of the same F frames: ((F, 13, 3) joints, the
     PoseResult kept per frame). Where both passes solved a frame from its markers, the mean of
     their states (:func:`_merge`, bone lengths ``lengths`` (8,) m); where only the backward pass
@@ -556,8 +558,9 @@ def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarr
     into a blackout, where the forward bridge is already as far as a guess may go. markers:
     the (F, 8, 3) markers both passes solved (NaN = unseen), to take a hidden limb more from the
     pass that saw it more recently (:func:`_gap_weights`; None: equal weights) and to keep a
-    pass's pose where the merge fits them worse (:func:`_fitting`). A merged frame's joint
-    bounds cover both passes' (:func:`_bounds_at`)."""
+    pass's pose where the merge fits them worse (:func:`_fitting`; offsets (8, 3) the subject's
+    marker offsets, None = joint centres). A merged frame's joint bounds cover both passes'
+    (:func:`_bounds_at`)."""
     F = len(fwd)
     joints = np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3)
     results = list(fwd)
@@ -568,7 +571,7 @@ def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarr
         if a.status == "solved" and a.state is not None and b.state is not None:
             merged = _merge(a, b, lengths, w[i])
             if markers is not None:
-                merged = _fitting(merged, a.joints, b.joints, markers[i])
+                merged = _fitting(merged, a.joints, b.joints, markers[i], offsets)
             joints[i] = merged
             results[i] = replace(a, bounds=_bounds_at(merged, a, b))
         elif a.status != "solved":
@@ -589,7 +592,7 @@ def solve_both_ways(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, prog
         return np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3), fwd
     # time runs backwards: feed -t so the solver sees increasing times
     bwd = solve_frames(rec.again(rec.subject), markers, -np.asarray(t, float), range(F - 1, -1, -1), progress)
-    return merge_passes(fwd, bwd, rec.lengths, markers)
+    return merge_passes(fwd, bwd, rec.lengths, markers, rec.offsets)
 
 
 def reconstruct_take(markers: np.ndarray, t: np.ndarray, db: MotionDB | None = None,

@@ -5,6 +5,7 @@ import pytest
 
 from samba_common.body import bone_lengths, prepend_standard_pose
 from samba_common.bvh import load_bvh, resample
+from samba_common.markerset import TYPICAL_OFFSETS, markers_from_joints
 from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT, UNOBSERVED_JOINTS
 from samba_server.recon.db import load_default_db
 from samba_server.recon.evaluate import mpjpe, observe, vary_body
@@ -163,6 +164,10 @@ def test_a_merge_that_fits_neither_pass_keeps_a_pass_and_its_bounds_cover_both(h
     gap = np.linalg.norm(a.joints - b.joints, axis=1)
     assert gap.max() > 0.2
     np.testing.assert_array_less(b.bounds + gap - 1e-9, results[0].bounds + 1e-9)
+    # skin markers: the fit is judged on the model's markers (joint centres plus offsets)
+    skin = markers_from_joints(a.joints[None], TYPICAL_OFFSETS)
+    joints, _ = merge_passes([a], [b], lengths, skin, TYPICAL_OFFSETS)
+    np.testing.assert_allclose(joints[0], a.joints)
     # passes that agree merge as before, their bounds barely grow
     joints, results = merge_passes([a], [replace(a)], lengths, m)
     np.testing.assert_allclose(joints[0], a.joints, atol=1e-6)
