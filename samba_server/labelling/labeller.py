@@ -739,12 +739,12 @@ class Labeller:
         wrong way round). One broken shin beside a good one is a bad point (a knee point off
         for a frame), not a swap, unless the swap mends it and fits both shins within
         ``shin_mend_max`` of the tolerance (a standing ankle between the knees is a shin from
-        both: a swap of the ankles breaks one shin only; >= 3 cameras). Swapping the knees or the ankles makes the same two shins, so
-        which pair is wrong comes from the knees' order along the subject's right (3,): knees
-        named crossed are the swapped pair (thighs hardly cross, feet often do), else the
-        ankles. out (8, 3), assign, arow (8,) in place; nothing when right is None."""
-        legs = [LK, RK, LA, RA]
-        if right is None or (assign[legs] < 0).any() or len(set(assign[legs].tolist())) < 4:
+        both: a swap of the ankles breaks one shin only; >= 3 cameras). Swapping the knees or
+        the ankles makes the same two shins, so which pair is wrong comes from the knees' order
+        along the subject's right (3,): knees named crossed are the swapped pair (thighs hardly
+        cross, feet often do), else the ankles. out (8, 3), assign, arow (8,) in place; nothing
+        when right is None."""
+        if right is None or not _legs_apart(assign):
             return
         body = self._body
         named, mended = _shin_errors(body, out)
@@ -772,10 +772,8 @@ class Labeller:
         hardly cross, feet often do), unless they are named crossed: then they swap. Three
         cameras or more (with two, ghost points break shins as often). out (8, 3), assign, arow
         (8,) in place."""
-        legs = [LK, RK, LA, RA]
         holds = False
-        if right is not None and len(self.rig) >= 3 and (assign[legs] >= 0).all() \
-                and len(set(assign[legs].tolist())) == 4:
+        if right is not None and len(self.rig) >= 3 and _legs_apart(assign):
             named, crossed = _shin_errors(self._body, out)
             holds = max(crossed) <= self.config.cross_fit * self._body.tol and \
                 sum(named) - sum(crossed) >= self.config.cross_gain_m
@@ -1260,6 +1258,13 @@ def _held_since(since: float | None, holds: bool, t: float) -> float | None:
     if not holds:
         return None
     return t if since is None else since
+
+
+def _legs_apart(assign: np.ndarray) -> bool:
+    """All four leg markers named, each on a point of its own (assign (8,): point per marker,
+    -1 = none): what the shin rules need to tell a swap from a merged point."""
+    legs = assign[[LK, RK, LA, RA]]
+    return bool((legs >= 0).all()) and len(set(legs.tolist())) == 4
 
 
 def _shin_errors(body: Body, out: np.ndarray) -> tuple[list[float], list[float]]:
