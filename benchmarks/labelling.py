@@ -25,6 +25,7 @@ blackout, solved the same way: forwards and backwards merged, or forwards only w
 
     python benchmarks/labelling.py [--data ../shared/data/cmu-bvh] [--cameras 4 2] [--codec mjpg]
     python benchmarks/labelling.py --start 8   # the clips' later parts, which the default never runs
+    python benchmarks/labelling.py --body-scale 0.75   # child-sized bodies (1.25: very tall adults)
 """
 
 from __future__ import annotations
@@ -113,6 +114,9 @@ def main() -> int:
                     help=f"where in each clip the part used starts (s): e.g. 8 for the parts the default never runs "
                          f"(clips with less than {MIN_PART_S:g} s left are skipped)")
     ap.add_argument("--seconds", type=float, default=8.0, help="longest part of a clip used")
+    ap.add_argument("--body-scale", type=float, default=None,
+                    help="every body this size (x the clip's subject; default: x0.85-1.15 by clip), e.g. 0.75 for "
+                         "children, 1.25 for very tall adults")
     ap.add_argument("--blackout", type=float, default=1.0, help="seconds of total blackout mid-motion (0 = none)")
     ap.add_argument("--codec", default="mjpg", choices=["ffv1", "mjpg", "h264"])
     ap.add_argument("--seed", type=int, default=3)
@@ -144,7 +148,8 @@ def main() -> int:
             dbs[subject] = build_db([f for f in files if not f.name.startswith(subject + "_")], fps=30.0)
         db = dbs[subject]
         # the body depends on the seed and the clip only: a take is the same with --clips
-        joints, _lengths = vary_body(joints, np.random.default_rng([args.seed, zlib.crc32(clip.encode())]))
+        joints, _lengths = vary_body(joints, np.random.default_rng([args.seed, zlib.crc32(clip.encode())]),
+                                     scale=args.body_scale)
         for n_cam in args.cameras:
             base = SimConfig(codec=args.codec)
             n_lead = prepare_motion(joints, t, base)[2]
@@ -227,8 +232,13 @@ def main() -> int:
         title = "Marker identification (benchmarks/labelling.py)"
         if args.start:  # another part of the clips: its own section, the default one stays
             title += f", clips from {args.start:g} s (--start {args.start:g})"
+        size = args.body_scale
+        if size is not None:
+            title += f", bodies x{size:g} (--body-scale {size:g})"
         record(title,
-               [f"Held-out subjects (database without the clip's subject), bodies varied, samba-sim defaults (feet at hip "
+               [f"Held-out subjects (database without the clip's subject), "
+                f"{'bodies varied' if size is None else f'bodies x{size:g} the subject (bone types varied)'}, "
+                f"samba-sim defaults (feet at hip "
                 f"width, standard pose in the middle of the volume and a continuous walk into the clip, occlusion by the "
                 f"body, distractors, noise), {args.blackout:g} s blackout mid-motion, {args.codec.upper()} videos through "
                 f"samba-process's offline path ({'forwards only' if args.one_pass else 'labelled from both ends'}; "

@@ -28,7 +28,7 @@ import numpy as np
 
 from .rigid import LA, LEVEL_M, LK, LS, LW, RA, RK, RS, RW, Body
 
-__all__ = ["Hint", "Hypothesis", "identify", "right_of", "score_labels"]
+__all__ = ["Hint", "Hypothesis", "identify", "right_of", "score_labels", "sized"]
 
 _UP = np.array([0.0, 0.0, 1.0])
 #: a right knee (ankle) less than _LATERAL_M m to the subject's right of the left one costs
@@ -46,6 +46,8 @@ _HIGH_ANKLE_W, _HIGH_ANKLE_M = 2.0, 0.25
 _SHARED_NAME = 0.4
 #: a knee nearer its shoulder than _NEAR_F trunks costs _NEAR_W per metre (at most 2)
 _NEAR_W, _NEAR_F = 8.0, 0.75
+#: before the subject is measured, the prior body is scaled to the shoulders' height within these
+_SCALE_LO, _SCALE_HI, _SCALE_FREE = 0.7, 1.2, 0.1
 
 
 @dataclass
@@ -144,6 +146,20 @@ def _leg_options(X: np.ndarray, free: list[int], s: np.ndarray, body: Body) -> l
         if pen_a is not None:
             out.append((-1, a, pen_a))
     return out
+
+
+def sized(body: Body, left: np.ndarray, right: np.ndarray) -> Body:
+    """The body to name the rest by, with the shoulders at left, right (3,) m: a measured body
+    as it is; before the subject is measured, the prior body scaled to the shoulders' height (as
+    if standing, between _SCALE_LO and _SCALE_HI of the prior's) less _SCALE_FREE, the prior's own
+    spread (a body within it is taken as the prior). A child in the standard pose (1.3 m tall,
+    shoulders 0.29 m apart) fitted the database's adult body better with a shoulder and a wrist
+    taken for the shoulders."""
+    if body.measured or body.stand <= 0:
+        return body
+    s = min(_SCALE_HI, max(_SCALE_LO, 0.5 * float(left[2] + right[2]) / body.stand))
+    s = 1.0 + math.copysign(max(0.0, abs(s - 1.0) - _SCALE_FREE), s - 1.0)
+    return body if s == 1.0 else body.scaled(s)
 
 
 def _shoulders(X: np.ndarray, L: int, R: int, trust: np.ndarray, body: Body, hint: Hint) -> tuple[float, np.ndarray] | None:
@@ -252,21 +268,22 @@ def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = N
     hyps: dict[tuple, Hypothesis] = {}
     for i, j in combinations(idx, 2):
         for L, R in ((i, j), (j, i)):
-            sh = _shoulders(X, L, R, trust, body, hint)
+            pb = sized(body, X[L], X[R])
+            sh = _shoulders(X, L, R, trust, pb, hint)
             if sh is None:
                 continue
             base, f = sh
             free = [p for p in idx if p not in (L, R)]
-            legs_l = _leg_options(X, free, X[L], body)
-            legs_r = _leg_options(X, free, X[R], body)
+            legs_l = _leg_options(X, free, X[L], pb)
+            legs_r = _leg_options(X, free, X[R], pb)
             pairs = [p for p in (_legs_score(X, trust, L, R, ol, orr, f, shared, hint) for ol in legs_l for orr in legs_r)
                      if p is not None]
             pairs.sort(key=lambda p: -p[0])
             for sc, kl, al, kr, ar in pairs[:legs_kept]:
                 taken = {L, R, kl, al, kr, ar}
                 rest = [p for p in free if p not in taken]
-                wl = [-1] + [p for p in rest if np.linalg.norm(X[p] - X[L]) <= body.reach + body.tol]
-                wr = [-1] + [p for p in rest if np.linalg.norm(X[p] - X[R]) <= body.reach + body.tol]
+                wl = [-1] + [p for p in rest if np.linalg.norm(X[p] - X[L]) <= pb.reach + pb.tol]
+                wr = [-1] + [p for p in rest if np.linalg.norm(X[p] - X[R]) <= pb.reach + pb.tol]
                 for a in wl:
                     for b in wr:
                         if a >= 0 and a == b:
@@ -293,6 +310,7 @@ def score_labels(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None
     L, R = int(labels[LS]), int(labels[RS])
     if L < 0 or R < 0 or L == R:
         return None
+    body = sized(body, X[L], X[R])
     sh = _shoulders(X, L, R, trust, body, hint)
     if sh is None:
         return None

@@ -40,7 +40,7 @@ from samba_common.skeleton import MARKER_JOINT, N_MARKERS
 from ..triangulate import Triangulator
 from .blobs import view_blobs
 from .elongation import blob_separation, jacobians, separation_3d
-from .identify import Hint, identify, right_of, score_labels
+from .identify import Hint, identify, right_of, score_labels, sized
 from .points import PointReconstructor, Points3D, PointsConfig
 from .rigid import LA, LEVEL_M, LK, LS, LW, RA, RK, RS, RW, SIDES, Body
 
@@ -170,8 +170,8 @@ class Labeller:
         self.config = config or LabelConfig()
         self.points = PointReconstructor(rig, triangulator or Triangulator(rig), self.config.points)
         self.stats = LabelStats()
-        self._body = Body.from_lengths(prior_lengths, self.config.rigid_abs_tol, self.config.rigid_rel_tol,
-                                       measured=False)
+        self._prior = self._body = Body.from_lengths(prior_lengths, self.config.rigid_abs_tol,
+                                                     self.config.rigid_rel_tol, measured=False)
         self._lengths_key: bytes | None = None
         self._pos = np.full((N_MARKERS, 3), np.nan)
         self._vel = np.zeros((N_MARKERS, 3))
@@ -770,10 +770,11 @@ class Labeller:
         (knees apart, feet 30 cm apart the other way round) kept her ankles named the wrong way
         round for 3.5 s, tight fits that no bound flags. The knees keep their order (thighs
         hardly cross, feet often do), unless they are named crossed: then they swap. Three
-        cameras or more (with two, ghost points break shins as often). out (8, 3), assign, arow
-        (8,) in place."""
+        cameras or more (with two, ghost points break shins as often), and the subject measured
+        (a child's feet together, 12 cm apart, fit an adult's shin better crossed). out (8, 3),
+        assign, arow (8,) in place."""
         holds = False
-        if right is not None and len(self.rig) >= 3 and _legs_apart(assign):
+        if right is not None and len(self.rig) >= 3 and self._body.measured and _legs_apart(assign):
             named, crossed = _shin_errors(self._body, out)
             holds = max(crossed) <= self.config.cross_fit * self._body.tol and \
                 sum(named) - sum(crossed) >= self.config.cross_gain_m
@@ -1166,6 +1167,8 @@ class Labeller:
         margin = _margin(labels, best.score, hyps[1:])
         out = self._named(pts, labels, best.facing)
         named = labels >= 0
+        if not self._body.measured:  # the rules until the subject is measured: the prior at this size
+            self._body = sized(self._prior, out[LS], out[RS])
         self.stats.identifications += 1
         if self.stats.first_identified_t is None:
             self.stats.first_identified_t = t

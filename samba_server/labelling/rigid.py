@@ -8,7 +8,7 @@ body (else an average adult) stands in, with wider tolerances.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -52,6 +52,12 @@ class Body:
     top: float  #: the highest a shoulder goes above the floor (standing height + RISE_M + tol)
     tol: float
     measured: bool
+    stand: float = 0.0  #: the shoulders' height standing straight
+
+    def scaled(self, factor: float) -> "Body":
+        """The same body ``factor`` times as large (lengths only; tolerances and ceiling kept)."""
+        return replace(self, shin=self.shin * factor, shoulder_width=self.shoulder_width * factor,
+                       reach=self.reach * factor, trunk=self.trunk * factor, stand=self.stand * factor)
 
     @staticmethod
     def from_lengths(lengths: np.ndarray | None, abs_tol: float = 0.05, rel_tol: float = 0.03,
@@ -71,7 +77,7 @@ class Body:
                     trunk=float(np.hypot(ln[_B["torso"]], 0.5 * (ln[_B["shoulder_width"]] - ln[_B["hip_width"]]))
                                 + ln[_B["thigh"]]),
                     top=shoulder_height(ln) + RISE_M + float(tol),
-                    tol=float(tol), measured=measured)
+                    tol=float(tol), measured=measured, stand=shoulder_height(ln))
 
     def shin_error(self, knee: np.ndarray, ankle: np.ndarray) -> float:
         return abs(float(np.linalg.norm(knee - ankle)) - self.shin)

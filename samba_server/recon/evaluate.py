@@ -17,15 +17,17 @@ TIBIA = 0.45
 
 
 def vary_body(joints: np.ndarray, rng: np.random.Generator, global_range: float = 0.15,
-              bone_range: float = 0.07) -> tuple[np.ndarray, np.ndarray]:
+              bone_range: float = 0.07, scale: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Re-pose (F, 13, 3) joints with new bone lengths; returns (joints, lengths (8,)).
 
-    The whole skeleton is scaled by a factor in [1 - global_range, 1 + global_range] and each
-    bone type by a further factor in [1 - bone_range, 1 + bone_range]; joint directions and the
-    horizontal shoulder trajectory are kept, the height follows the new legs.
+    The whole skeleton is scaled by a factor in [1 - global_range, 1 + global_range] (or by
+    ``scale``: the same draws otherwise, so the same body at another size) and each bone type by
+    a further factor in [1 - bone_range, 1 + bone_range]; joint directions and the horizontal
+    shoulder trajectory are kept, the height follows the new legs.
     """
     base = np.median(bone_lengths(joints), axis=0)
     g = rng.uniform(1 - global_range, 1 + global_range)
+    g = g if scale is None else scale
     lengths = base * g * rng.uniform(1 - bone_range, 1 + bone_range, size=len(BONE_TYPES))
     origin, R, dirs = decompose(joints)
     out = fk(origin * np.array([g, g, 1.0]), R, dirs, lengths)

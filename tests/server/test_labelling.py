@@ -392,6 +392,23 @@ def test_a_tall_subject_is_named_at_once_against_the_databases_mean_body():
     assert _right(named, pose[None])[-5:].all(), named[-1] - pose
 
 
+@pytest.mark.parametrize("stance", ["together", "hip"])
+def test_a_child_sized_subject_is_named_right_against_the_databases_adult_body(stance):
+    """Before the subject is measured the labelling scales the database's adult body to the
+    shoulders' height: a subject three quarters of an adult's size (shoulders 1.1 m up, 0.26 m
+    apart) is named right in the standard pose. Against the adult body unscaled, a shoulder
+    and the wrist beyond it were the shoulders (0.37 m apart, nearer the adult's 0.37 m) and
+    every name of a rendered walk was wrong (0 % of frames right, every confident frame
+    > 20 cm off)."""
+    rig = default_rig(4)
+    lengths = np.asarray(DEFAULT_LENGTHS) * 0.75
+    pose = tpose(lengths, stance=stance_offset(stance, float(lengths[1])))[list(MARKER_JOINT)]
+    cmu = np.array([0.367, 0.194, 0.496, 0.143, 0.252, 0.257, 0.477, 0.498])  # the motion database's mean body
+    named = _run(Labeller(rig, prior_lengths=cmu), rig, np.repeat(pose[None], 10, axis=0), np.random.default_rng(0))
+    assert _right(named, pose[None])[-5:].all(), named[-1] - pose
+    assert not (np.isfinite(named).all(axis=2) & ~_right(named, pose[None])).any()  # never a wrong name
+
+
 def test_knees_seen_in_merged_blobs_are_not_taken_for_crossed_legs():
     """Knees at hip width merge in some views, so their points sit near the middle (5 cm
     apart instead of 20). Swapping them cost only the lateral term, within the 0.6 margin an
