@@ -34,6 +34,9 @@ _UP = np.array([0.0, 0.0, 1.0])
 #: a right knee (ankle) less than _LATERAL_M m to the subject's right of the left one costs
 #: _LATERAL_W per metre: legs cross little, so a swapped pair costs about 1
 _LATERAL_W, _LATERAL_M = 4.0, 0.03
+#: a pair named crossed before the names were lost costs _HELD_W per metre side by side (the
+#: subject may have moved the feet meanwhile: less than a pair side by side costs crossed)
+_HELD_W = 2.0
 #: knees and ankles in opposite lateral orders (each pair more than _LATERAL_M apart) cost _CROSS_W
 _CROSS_W = 0.4
 #: shoulders more than _TILT_M m apart in height cost _TILT_W per metre (a wrist at shoulder
@@ -58,7 +61,8 @@ class Hint:
     facing_slack: radians the subject may have turned since (a facing within it of the known
     one costs nothing); velocity: (3,) m/s of the body's centre over the last frames, or None;
     labels: (8,) point per marker that tracking named (-1 = none), each agreeing name adding
-    labels_weight.
+    labels_weight; crossed: (knees, ankles) last named crossed (the right one left of the left
+    one) just before the names were lost: that pair is expected crossed, not side by side.
     """
 
     facing: np.ndarray | None = None
@@ -67,6 +71,7 @@ class Hint:
     velocity: np.ndarray | None = None
     labels: np.ndarray | None = None
     labels_weight: float = 0.0
+    crossed: tuple[bool, bool] = (False, False)
 
     def agree(self, marker: int, point: int) -> float:
         """Bonus for naming point as marker when tracking did too."""
@@ -200,11 +205,17 @@ def _legs_score(X: np.ndarray, trust: np.ndarray, L: int, R: int, left: tuple[in
     sc = len(used) - pl - pr - sum(trust[p] for p in used)
     sc -= 2.0 * (_knee_bend(X, X[L], kl, al, f) + _knee_bend(X, X[R], kr, ar, f))
     side = []
-    for a, b in ((kl, kr), (al, ar)):
+    for a, b, crossed in ((kl, kr, hint.crossed[0]), (al, ar, hint.crossed[1])):
         if a >= 0 and b >= 0:
             side.append(float((X[b] - X[a])[:2] @ r))
-            sc -= _LATERAL_W * max(0.0, _LATERAL_M - side[-1])
-    if len(side) == 2 and side[0] * side[1] < 0 and min(abs(side[0]), abs(side[1])) > _LATERAL_M:
+            # the left one on the left, or (less surely) the order it had, crossed, just before
+            # the names were lost
+            if crossed:
+                sc -= _HELD_W * max(0.0, _LATERAL_M + side[-1])
+            else:
+                sc -= _LATERAL_W * max(0.0, _LATERAL_M - side[-1])
+    if len(side) == 2 and side[0] * side[1] < 0 and min(abs(side[0]), abs(side[1])) > _LATERAL_M \
+            and not any(hint.crossed):
         sc -= _CROSS_W  # the knees in one order, the ankles in the other: the legs cross
     kl, kr = _share(kl, kr, shared)
     al, ar = _share(al, ar, shared)

@@ -76,6 +76,7 @@ class LabelConfig:
     max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast ...
     turn_slack_deg: float = 45.0  #: ... plus this much (noise of the shoulder points) between labellings
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
+    crossed_memory_s: float = 2.0  #: a pair named crossed this little before the names were lost may be crossed again
     knees_crossed_s: float = 1.0  #: knees crossed (by crossed_m) this long are the legs' names swapped (inf: never)
     arm_swap_s: float = 0.05  #: a shoulder off the shoulder width whose own wrist's point fits it this long swaps with that wrist (inf: never)
     reach_swap_m: float = 0.02  #: the wrists swap names when one is this far beyond its arm's reach from its shoulder ... (inf: never)
@@ -962,6 +963,22 @@ class Labeller:
             hint.velocity = (c1 - c0) / (t1 - t0)
         return hint
 
+    def _crossed_before(self, t: float) -> tuple[bool, bool]:
+        """(knees, ankles): the pair was last named crossed, the right one more than ``crossed_m``
+        left of the left one along the last facing, within ``crossed_memory_s`` before t. A
+        dancer standing on one foot with the other pointed out behind and across it holds the
+        pose through a blackout; "the left leg on the left" made the identification name her
+        legs mirrored, or leave them to a skeleton that did."""
+        cfg = self.config
+        if self._facing is None:
+            return False, False
+        right = right_of(self._facing)
+        out = []
+        for lm, rm in ((LK, RK), (LA, RA)):
+            known = np.isfinite(self._pos[[lm, rm]]).all() and t - min(self._seen[lm], self._seen[rm]) <= cfg.crossed_memory_s
+            out.append(bool(known and float((self._pos[rm] - self._pos[lm]) @ right) < -cfg.crossed_m))
+        return out[0], out[1]
+
     @staticmethod
     def _trust(pts: Points3D) -> np.ndarray:
         """(M,) identification penalty per point: 0 from >= 3 views, else for the views that missed it."""
@@ -1144,7 +1161,9 @@ class Labeller:
         cfg = self.config
         if len(pts) < cfg.min_points:
             return None
-        hyps = identify(pts.X, self._trust(pts), self._raised(pts), self._hint(t), shared=pts.merged_all)
+        hint = self._hint(t)
+        hint.crossed = self._crossed_before(t)
+        hyps = identify(pts.X, self._trust(pts), self._raised(pts), hint, shared=pts.merged_all)
         if not hyps:
             self._t_ambiguous = self._steady = None
             return None
