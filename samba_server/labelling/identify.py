@@ -153,16 +153,19 @@ def _leg_options(X: np.ndarray, free: list[int], s: np.ndarray, body: Body) -> l
     return out
 
 
-def sized(body: Body, left: np.ndarray, right: np.ndarray) -> Body:
+def sized(body: Body, left: np.ndarray, right: np.ndarray, lowest: float = 0.0) -> Body:
     """The body to name the rest by, with the shoulders at left, right (3,) m: a measured body
     as it is; before the subject is measured, the prior body scaled to the shoulders' height (as
     if standing, between _SCALE_LO and _SCALE_HI of the prior's) less _SCALE_FREE, the prior's own
     spread (a body within it is taken as the prior). A child in the standard pose (1.3 m tall,
     shoulders 0.29 m apart) fitted the database's adult body better with a shoulder and a wrist
-    taken for the shoulders."""
+    taken for the shoulders. lowest: the height (m) of the frame's lowest point; above
+    _HIGH_ANKLE_M the feet are not seen on the floor (a subject up on a structure, or the feet
+    hidden), so the shoulders' height says nothing of a larger body: never scaled up then."""
     if body.measured or body.stand <= 0:
         return body
-    s = min(_SCALE_HI, max(_SCALE_LO, 0.5 * float(left[2] + right[2]) / body.stand))
+    hi = _SCALE_HI if lowest <= _HIGH_ANKLE_M else 1.0
+    s = min(hi, max(_SCALE_LO, 0.5 * float(left[2] + right[2]) / body.stand))
     s = 1.0 + math.copysign(max(0.0, abs(s - 1.0) - _SCALE_FREE), s - 1.0)
     return body if s == 1.0 else body.scaled(s)
 
@@ -277,9 +280,10 @@ def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = N
         return []
     idx = list(np.argsort(trust, kind="stable")[:max_points])
     hyps: dict[tuple, Hypothesis] = {}
+    lowest = float(X[:, 2].min())
     for i, j in combinations(idx, 2):
         for L, R in ((i, j), (j, i)):
-            pb = sized(body, X[L], X[R])
+            pb = sized(body, X[L], X[R], lowest)
             sh = _shoulders(X, L, R, trust, pb, hint)
             if sh is None:
                 continue
@@ -321,7 +325,7 @@ def score_labels(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None
     L, R = int(labels[LS]), int(labels[RS])
     if L < 0 or R < 0 or L == R:
         return None
-    body = sized(body, X[L], X[R])
+    body = sized(body, X[L], X[R], float(X[:, 2].min()))
     sh = _shoulders(X, L, R, trust, body, hint)
     if sh is None:
         return None

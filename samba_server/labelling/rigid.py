@@ -52,7 +52,7 @@ class Body:
     top: float  #: the highest a shoulder goes above the floor (standing height + RISE_M + tol)
     tol: float
     measured: bool
-    stand: float = 0.0  #: the shoulders' height standing straight
+    stand: float = 0.0  #: the shoulders' height standing straight (0: not known, never scaled)
 
     def scaled(self, factor: float) -> "Body":
         """The same body ``factor`` times as large (lengths only; tolerances and ceiling kept)."""
