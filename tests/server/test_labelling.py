@@ -409,6 +409,25 @@ def test_a_child_sized_subject_is_named_right_against_the_databases_adult_body(s
     assert not (np.isfinite(named).all(axis=2) & ~_right(named, pose[None])).any()  # never a wrong name
 
 
+def test_the_prior_body_grows_only_for_a_subject_standing_on_the_floor():
+    """A tall subject's shoulders (1.9 m up, feet on the floor) scale the database's body up; the
+    same shoulders with the lowest point 0.75 m up (a climber's standard pose on a frame, traced:
+    a 2-camera take of it fell from 41.5 to 0.0 % of frames right when the body grew) or seen by
+    two cameras only (ghosts at any height) leave it as it is. Shoulders lower than standing
+    (a child) still shrink it wherever the feet are."""
+    from samba_server.labelling.identify import sized
+    from samba_server.labelling.rigid import Body
+    cmu = np.array([0.367, 0.194, 0.496, 0.143, 0.252, 0.257, 0.477, 0.498])
+    prior = Body.from_lengths(cmu, measured=False)
+    high = np.array([0.0, 0.0, 1.9]), np.array([0.4, 0.0, 1.9])
+    low = np.array([0.0, 0.0, 1.1]), np.array([0.3, 0.0, 1.1])
+    assert sized(prior, *high, lowest=0.08).shin > 1.05 * prior.shin
+    assert sized(prior, *high, lowest=0.75) == prior
+    assert sized(prior, *low, lowest=0.75).shin < 0.9 * prior.shin
+    assert sized(Labeller(default_rig(2), prior_lengths=cmu)._prior, *high, lowest=0.08).shin == prior.shin
+    assert sized(Labeller(default_rig(4), prior_lengths=cmu)._prior, *high, lowest=0.08).shin > prior.shin
+
+
 def test_knees_seen_in_merged_blobs_are_not_taken_for_crossed_legs():
     """Knees at hip width merge in some views, so their points sit near the middle (5 cm
     apart instead of 20). Swapping them cost only the lateral term, within the 0.6 margin an
