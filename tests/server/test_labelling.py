@@ -22,6 +22,8 @@ from samba_server.labelling.rigid import LS, LW, RS, RW
 from samba_server.triangulate import Triangulator
 
 FPS = 60.0
+#: the shipped motion database's mean body (BONE_TYPES order, m), the prior the server passes
+CMU_MEAN = np.array([0.367, 0.194, 0.496, 0.143, 0.252, 0.257, 0.477, 0.498])
 
 
 def _packets(rig, markers, t, rng, labels=None, distractors=None, noise_px=0.1):
@@ -403,8 +405,8 @@ def test_a_child_sized_subject_is_named_right_against_the_databases_adult_body(s
     rig = default_rig(4)
     lengths = np.asarray(DEFAULT_LENGTHS) * 0.75
     pose = tpose(lengths, stance=stance_offset(stance, float(lengths[1])))[list(MARKER_JOINT)]
-    cmu = np.array([0.367, 0.194, 0.496, 0.143, 0.252, 0.257, 0.477, 0.498])  # the motion database's mean body
-    named = _run(Labeller(rig, prior_lengths=cmu), rig, np.repeat(pose[None], 10, axis=0), np.random.default_rng(0))
+    named = _run(Labeller(rig, prior_lengths=CMU_MEAN), rig, np.repeat(pose[None], 10, axis=0),
+                 np.random.default_rng(0))
     assert _right(named, pose[None])[-5:].all(), named[-1] - pose
     assert not (np.isfinite(named).all(axis=2) & ~_right(named, pose[None])).any()  # never a wrong name
 
@@ -417,15 +419,14 @@ def test_the_prior_body_grows_only_for_a_subject_standing_on_the_floor():
     (a child) still shrink it wherever the feet are."""
     from samba_server.labelling.identify import sized
     from samba_server.labelling.rigid import Body
-    cmu = np.array([0.367, 0.194, 0.496, 0.143, 0.252, 0.257, 0.477, 0.498])
-    prior = Body.from_lengths(cmu, measured=False)
+    prior = Body.from_lengths(CMU_MEAN, measured=False)
     high = np.array([0.0, 0.0, 1.9]), np.array([0.4, 0.0, 1.9])
     low = np.array([0.0, 0.0, 1.1]), np.array([0.3, 0.0, 1.1])
     assert sized(prior, *high, lowest=0.08).shin > 1.05 * prior.shin
     assert sized(prior, *high, lowest=0.75) == prior
     assert sized(prior, *low, lowest=0.75).shin < 0.9 * prior.shin
-    assert sized(Labeller(default_rig(2), prior_lengths=cmu)._prior, *high, lowest=0.08).shin == prior.shin
-    assert sized(Labeller(default_rig(4), prior_lengths=cmu)._prior, *high, lowest=0.08).shin > prior.shin
+    assert sized(Labeller(default_rig(2), prior_lengths=CMU_MEAN)._prior, *high, lowest=0.08).shin == prior.shin
+    assert sized(Labeller(default_rig(4), prior_lengths=CMU_MEAN)._prior, *high, lowest=0.08).shin > prior.shin
 
 
 def test_knees_seen_in_merged_blobs_are_not_taken_for_crossed_legs():
@@ -514,8 +515,8 @@ def test_a_small_subjects_merged_legs_are_named_in_the_standard_pose():
                   [-0.375, 0.375, 0.321], [0.402, 0.402, 0.324]])
     trust = np.r_[np.zeros(6), np.full(4, 1.8)]
     shared = np.r_[np.zeros(4, bool), np.ones(6, bool)]
-    cmu = np.array([0.367, 0.194, 0.496, 0.143, 0.252, 0.257, 0.477, 0.498])  # the motion database's mean body
-    hyps = identify(X, trust, Body.from_lengths(cmu, measured=False), Hint(np.array([0.0, 1.0]), 1.0), shared=shared)
+    hyps = identify(X, trust, Body.from_lengths(CMU_MEAN, measured=False), Hint(np.array([0.0, 1.0]), 1.0),
+                    shared=shared)
     assert list(hyps[0].labels) == [0, 3, 2, 1, 4, 4, 5, 5]
     assert hyps[0].score - hyps[1].score >= LabelConfig().min_margin
 
