@@ -84,7 +84,7 @@ from .server import Server, ServerConfig
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PassResult", "backward_pass", "choose", "relabel_both_ways"]
+__all__ = ["PassResult", "backward_pass", "choose", "loose_of", "relabel_both_ways"]
 
 #: m (LabelQuality.margin_m, 0.1 m per identification score unit): an identification whose
 #: best labelling beat the runner-up by less than this was a coin flip (after a blackout the
@@ -110,12 +110,14 @@ class PassResult:
     renamed: (F,) int, bit m set where the pass found marker m's name, held until the frame
     before, wrong and replaced it (``LabelQuality.renamed``); margin: (F,) label margin m;
     identified: (F,) the margin (m, ``LabelQuality.margin_m``) of the identification that
-    named the frame, NaN on the frames tracking named (None: no identification known)."""
+    named the frame, NaN on the frames tracking named (None: no identification known); loose:
+    (F, 8) bool, the named markers whose position is rough (:meth:`Labeller.loose`; None: none)."""
 
     markers: np.ndarray
     renamed: np.ndarray
     margin: np.ndarray
     identified: np.ndarray | None = None
+    loose: np.ndarray | None = None
 
 
 def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=None) -> PassResult | None:
@@ -132,13 +134,14 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
                   tri_config=server.triangulator.config, label_config=server.labeller.config)
     F = len(t)
     out = PassResult(np.full((F, N_MARKERS, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan),
-                     np.full(F, np.nan))
+                     np.full(F, np.nan), np.zeros((F, N_MARKERS), bool))
     t_end = float(t[-1]) if F else 0.0
     for k in range(F - 1, -1, -1):
         tb = t_end - float(t[k])  # backwards time runs forwards
         markers, _mask, q = twin.label_packets(packets[k], tb)
         markers = twin.solve_markers(markers, tb)[0]
         out.markers[k], out.margin[k], out.renamed[k] = markers, q.margin_m, q.renamed
+        out.loose[k] = twin.labeller.loose(markers)
         if q.mode == "identified":
             out.identified[k] = q.margin_m
         if progress is not None:
@@ -383,6 +386,19 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     return markers, from_b
 
 
+def loose_of(markers: np.ndarray, fwd: PassResult, bwd: PassResult) -> np.ndarray | None:
+    """(F, 8) bool: the chosen names markers (F, 8, 3) whose position is rough, as the pass that
+    named the marker at that point said (``PassResult.loose``); None when neither pass says."""
+    if fwd.loose is None and bwd.loose is None:
+        return None
+    out = np.zeros(markers.shape[:2], bool)
+    for p in (bwd, fwd):  # the forward pass's word where both name the point
+        if p.loose is not None:
+            at = _within(markers, p.markers, 1e-6)
+            out[at] = p.loose[at]
+    return out
+
+
 def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: PassResult,
                       progress=None) -> tuple[np.ndarray, dict] | None:
     """The two-way labelling of a take the forward (live) pass ``server`` has processed.
@@ -396,7 +412,7 @@ def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: P
         return None
     markers, take_b = choose(fwd, bwd, t)
     log.info("two-way labelling: %d of %d frames named from the backward pass", int(take_b.sum()), len(t))
-    joints, results = solve_both_ways(server.reconstructor.again(), markers, t)
+    joints, results = solve_both_ways(server.reconstructor.again(), markers, t, loose=loose_of(markers, fwd, bwd))
     extra = {"markers": markers, "residual": np.array([r.residual for r in results], float),
              "n_markers": np.isfinite(markers).all(axis=2).sum(axis=1),
              "label_margin": np.where(take_b, bwd.margin, fwd.margin), "from_backward": take_b,

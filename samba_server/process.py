@@ -95,12 +95,14 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     open_ = [True] * len(its)
     rig_index = [server.rig.names.index(n) for n in names]
     kept: list[list] = []  # per frame, per rig camera: the packet (both_ways)
-    # pose seq -> the markers its labelling renamed, and its identification's margin (NaN: tracked)
-    labelled_by_seq: dict[int, tuple[int, float]] = {}
+    # pose seq -> the markers its labelling renamed, its identification's margin (NaN: tracked),
+    # and its markers whose position is rough
+    labelled_by_seq: dict[int, tuple[int, float, np.ndarray]] = {}
 
     def note_renamed(msg) -> None:  # runs right after its frame was labelled: the last quality is that frame's
         q = server.labeller.last_quality
-        labelled_by_seq[msg.seq] = (q.renamed, q.margin_m if q.mode == "identified" else float("nan"))
+        labelled_by_seq[msg.seq] = (q.renamed, q.margin_m if q.mode == "identified" else float("nan"),
+                                    server.labeller.loose(np.asarray(msg.markers, float)))
 
     if both_ways:
         server.pose_listeners.append(note_renamed)
@@ -141,6 +143,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     bound = np.full((n_frames, 13), np.inf)
     renamed = np.zeros(n_frames, np.int64)
     identified = np.full(n_frames, np.nan)
+    loose = np.zeros((n_frames, 8), bool)
     t_live = np.arange(n_frames) / fps  # the server's own frame times (s since its first frame)
     t0_ns = server.poses[0].t_ns if server.poses else base
     for p in server.poses:
@@ -150,7 +153,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
             margin[k] = p.label_margin_m
             if p.joint_bound is not None:
                 bound[k] = p.joint_bound
-            renamed[k], identified[k] = labelled_by_seq.get(p.seq, (0, np.nan))
+            renamed[k], identified[k], loose[k] = labelled_by_seq.get(p.seq, (0, np.nan, loose[k]))
             t_live[k] = (p.t_ns - t0_ns) / 1e9
     t = np.arange(n_frames) / fps
     extra = {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin,
@@ -159,8 +162,8 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
         from .both_ways import PassResult, relabel_both_ways
 
         kept += [[None] * len(server.rig.names) for _ in range(n_frames - len(kept))]
-        again = relabel_both_ways(server, kept[:n_frames], t_live, PassResult(markers, renamed, margin, identified),
-                                  progress)
+        again = relabel_both_ways(server, kept[:n_frames], t_live,
+                                  PassResult(markers, renamed, margin, identified, loose), progress)
         if again is not None:
             live = {"joints": joints, "markers": markers, "joint_bound": bound}
             joints, extra = again

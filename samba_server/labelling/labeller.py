@@ -198,6 +198,7 @@ class Labeller:
         self._steady: tuple[float, float, np.ndarray] | None = None
         self._shared = np.zeros(N_MARKERS, bool)
         self._views: list = []  # this frame's blobs per camera (ViewBlobs)
+        self._pts: Points3D | None = None  # this frame's 3D points
         self._knees_crossed_since: float | None = None
         self._cross_since: float | None = None  # since when the shins fit clearly better crossed
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
@@ -309,12 +310,33 @@ class Labeller:
         self._named_last = bool(np.isfinite(out).all(axis=1).any())
         return out, q
 
+    def loose(self, markers: np.ndarray) -> np.ndarray:
+        """(8,) bool: the named markers of this frame's markers (8, 3) world m (NaN = not named)
+        whose position is rough: on a point that fewer than two views saw in a blob of its own
+        (in the others the blob was merged: the point may lie between two markers; 2 cm rms
+        against 5 mm on the labelling benchmark), placed by reflection, twice the size of one
+        marker everywhere, or named twice; or on no point at all (placed beside a merged point,
+        or found from blobs another point also used). ``samba-process``'s final two-way solve
+        weighs them less (``sigma_loose``; :mod:`samba_server.both_ways`)."""
+        named = np.isfinite(markers).all(axis=1)
+        out = named.copy()
+        pts = self._pts
+        if pts is None or not len(pts) or not named.any():
+            return out
+        d = np.linalg.norm(np.asarray(markers, float)[:, None, :] - pts.X[None], axis=2)  # (8, P)
+        p = np.argmin(np.where(np.isfinite(d), d, np.inf), axis=1)
+        on = named & (d[np.arange(N_MARKERS), p] <= 1e-6)
+        rough = (pts.n_views - pts.n_merged < 2) | pts.mirrored | pts.merged_all  # (P,)
+        twice = np.bincount(p[on], minlength=len(pts)) > 1  # (P,) points two names share
+        out[on] = (rough | twice)[p[on]]
+        return out
+
     def _label(self, packets: list, t: float) -> tuple[np.ndarray, LabelQuality]:
         self.stats.frames += 1
         self._t_prev, self._t_frame = self._t_frame, t
         self._rescued[:] = False
         self._views = [view_blobs(p) for p in packets]
-        pts = self.points.reconstruct(self._views)
+        pts = self._pts = self.points.reconstruct(self._views)
         if len(pts) >= 2:
             self.stats.frames_with_points += 1
             sure = pts.X[pts.n_views >= 3]

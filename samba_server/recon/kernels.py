@@ -6,11 +6,12 @@ order; torso rotation ``R`` (3, 3) with the torso axes as columns; metres.
 
 The energy minimised by :func:`lm_solve` is
 
-    |W (v(state) - mu)|^2 + sum_seen |(q_m - x_m) / sigma_m|^2 + [smooth] sum_j |(q_j - target_j) / sigma_s|^2
+    |W (v(state) - mu)|^2 + sum_seen |(q_m - x_m) / sigma_m[m]|^2 + [smooth] sum_j |(q_j - target_j) / sigma_s|^2
 
 where v is the 42-vector (vec(dirs), torso y and z axes in the marker body frame ``RA``, world
 up in torso coordinates), q the
-world joints and target the constant-velocity prediction (second difference of the pose).
+world joints, sigma_m (8,) each marker's noise (m) and target the constant-velocity prediction
+(second difference of the pose).
 The tangent step has 27 entries: rotation vector (3), translation (3), then two tangent angles
 per bone except the spine, which only leans in the torso's x-y plane (see :func:`param_col`).
 
@@ -481,7 +482,7 @@ def _residuals(R, o, dirs, lengths, offsets, mu, W, RA, obs, seen, sigma_m, smoo
         if seen[i]:
             for c in range(3):
                 m = q[MARKER_JOINTS[i], c] + R[c, 0] * w[i, 0] + R[c, 1] * w[i, 1] + R[c, 2] * w[i, 2]
-                r[k] = (m - obs[i, c]) / sigma_m
+                r[k] = (m - obs[i, c]) / sigma_m[i]
                 k += 1
     if smooth:
         for j in range(13):
@@ -541,10 +542,10 @@ def _jacobian(R, dirs, lengths, offsets, W, RA, seen, sigma_m, smooth, sigma_s, 
         Jm[r, 1] = wz0 * M[0, 0] + wz1 * M[1, 0] + wz2 * M[2, 0] - wu0 * u2 + wu2 * u0
         Jm[r, 2] = -(wy0 * M[0, 0] + wy1 * M[1, 0] + wy2 * M[2, 0]) + wu0 * u1 - wu1 * u0
     k = 42
-    inv_m = 1.0 / sigma_m
     extra = np.zeros((3, 27))
     for i in range(8):
         if seen[i]:
+            inv_m = 1.0 / sigma_m[i]
             j = MARKER_JOINTS[i]
             w0, w1, w2 = w[i, 0], w[i, 1], w[i, 2]
             has_w = w0 != 0.0 or w1 != 0.0 or w2 != 0.0
@@ -867,6 +868,7 @@ def frame(markers, has_pred, n_hist, q1, q2, m1, m2, has_state, R0, o0, d0, dt, 
     (see :mod:`samba_server.recon.kdtree`) over ``features`` (M, 27) columns feat_cols[p, :n_cols[p]]
     (24 aligned marker coordinates, then world up in the marker frame times ``up_weight``).
     offsets: (8, 3) marker offsets in segment frames (zeros: markers on the joint centres).
+    sigma_m: (8,) each marker's noise (m).
     Returns (status, q (13, 3), R, o, dirs, iterations, rms marker residual, markers seen, model
     markers (8, 3)) with status 0 = solved, 1 = bridged (too few markers, temporal model), 2 = unsolved.
     """

@@ -52,7 +52,9 @@ class ReconstructConfig:
     k: neighbours; pseudo: pseudo-poses per neighbour; ball_sigma_deg / hinge_sigma_deg: joint
     angle noise of pseudo-poses; prior_floor_deg: smallest standard deviation of a direction
     component in the prior; prior_weight: multiplies the prior energy; sigma_marker: marker
-    noise (m); accel, smooth_floor: the smoothness term allows a second difference of
+    noise (m); sigma_loose: noise (m) of a marker the labelling found only in merged blobs (its
+    point may sit between two markers: about 2 cm rms on the labelling benchmark, 5 mm for the
+    others); accel, smooth_floor: the smoothness term allows a second difference of
     hypot(accel * dt^2, smooth_floor) metres (typical acceleration, prediction noise); max_iter, tol: LM
     iteration cap and relative energy decrease that stops it; min_markers:
     fewer observed markers make a frame "bridged" by the temporal model; max_gap: longest bridge
@@ -73,6 +75,7 @@ class ReconstructConfig:
     prior_floor_deg: float = 5.0
     prior_weight: float = 0.5
     sigma_marker: float = 0.003
+    sigma_loose: float = 0.01
     accel: float = 80.0
     smooth_floor: float = 0.01
     min_markers: int = 4
@@ -292,14 +295,16 @@ class Reconstructor:
         self._hist = _History()
 
     # --- per frame -----------------------------------------------------------------------
-    def solve(self, markers: np.ndarray, t: float) -> PoseResult:
-        """Solve one frame. markers: (8, 3) world metres, NaN rows = unseen; t: seconds."""
+    def solve(self, markers: np.ndarray, t: float, loose: np.ndarray | None = None) -> PoseResult:
+        """Solve one frame. markers: (8, 3) world metres, NaN rows = unseen; t: seconds; loose:
+        (8,) bool, markers whose position is rough (``sigma_loose`` instead of ``sigma_marker``;
+        :meth:`~samba_server.labelling.Labeller.loose`), None = none."""
         markers = np.asarray(markers, dtype=float).reshape(N_MARKERS, 3)
         if self._estimating:
             self._estimate_body(markers)
             if self.lengths is None:
                 return self._unsolved(int(np.all(np.isfinite(markers), axis=1).sum()))
-        result = self._solve(markers, float(t))
+        result = self._solve(markers, float(t), loose)
         if self._calibration is not None:
             self._calibration.step(markers, float(t), result.status, result.residual, result.state)
             if self._calibration.done:
@@ -369,9 +374,9 @@ class Reconstructor:
     def _unsolved(self, n: int) -> PoseResult:
         return PoseResult(np.full((N_JOINTS, 3), np.nan), float("nan"), n, 0, "unsolved")
 
-    def _solve(self, markers: np.ndarray, t: float) -> PoseResult:
+    def _solve(self, markers: np.ndarray, t: float, loose: np.ndarray | None = None) -> PoseResult:
         self._hist = self._current(self._hist, t)
-        status, q, R, o, d, iters, resid, n_seen, mk = self._frame(markers, t, self._hist)
+        status, q, R, o, d, iters, resid, n_seen, mk = self._frame(markers, t, self._hist, loose)
         if status == 2:
             return PoseResult(q, float("nan"), int(n_seen), 0, "unsolved")
         h = self._hist
@@ -404,10 +409,14 @@ class Reconstructor:
         forgets the history, as :meth:`reset`)."""
         return h if h.n == 0 or t - h.t_seen <= self.config.max_gap else _History()
 
-    def _frame(self, markers: np.ndarray, t: float, h: _History) -> tuple:
+    def _frame(self, markers: np.ndarray, t: float, h: _History, loose: np.ndarray | None = None) -> tuple:
         """The compiled per-frame solve (:func:`kernels.frame`) of markers (8, 3) at t s from the
-        temporal state h, which it does not change; its outputs."""
+        temporal state h, which it does not change, with the markers loose (8,) bool (None: none)
+        at ``sigma_loose``; its outputs."""
         cfg = self.config
+        sigma = np.full(N_MARKERS, cfg.sigma_marker)
+        if loose is not None:
+            sigma[np.asarray(loose, bool)] = cfg.sigma_loose
         assert self.lengths is not None and self.index is not None
         has_pred = h.n > 0 and t - h.t_seen <= cfg.max_gap
         trees = self._trees
@@ -417,7 +426,7 @@ class Reconstructor:
             markers, has_pred, h.n, h.q1, h.q2, h.m1, h.m2, h.has_state, h.R, h.o, h.dirs, t - h.t_last if h.n else 0.0,
             trees, self.index.features, feat_cols, n_cols, UP_WEIGHT, self.index.R_A, self.db.dirs, self.db.up,
             min(cfg.k, len(self.db)),
-            dims, n_dims, self._cos, self._sin, self.lengths, self.offsets, self._floor2, cfg.prior_weight, cfg.sigma_marker,
+            dims, n_dims, self._cos, self._sin, self.lengths, self.offsets, self._floor2, cfg.prior_weight, sigma,
             cfg.accel, cfg.smooth_floor, cfg.min_markers, kernels.G, cfg.max_iter, cfg.tol)
 
     # --- trial solves (the labelling asks which names the solver can fit) ------------------
@@ -442,14 +451,16 @@ class Reconstructor:
         return float(resid) if status == 0 else float("nan")
 
 
-def solve_frames(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, order, progress=None) -> list[PoseResult]:
+def solve_frames(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, order, progress=None,
+                 loose: np.ndarray | None = None) -> list[PoseResult]:
     """``rec.solve`` over the frames in ``order`` (indices into markers (F, 8, 3) and t (F,) s;
     backwards in time with t negated): a PoseResult per frame, by frame index. A solver error
-    is logged and leaves the frame unsolved. progress: optional callable(1) per frame."""
+    is logged and leaves the frame unsolved. progress: optional callable(1) per frame; loose:
+    optional (F, 8) bool, the markers of each frame whose position is rough."""
     out: list[PoseResult] = [None] * len(t)  # type: ignore[list-item]
     for i in order:
         try:
-            out[i] = rec.solve(markers[i], float(t[i]))
+            out[i] = rec.solve(markers[i], float(t[i]), None if loose is None else loose[i])
         except Exception:
             log.exception("solver failed on frame t=%.3f s (frame left unsolved)", abs(float(t[i])))
             out[i] = PoseResult(np.full((N_JOINTS, 3), np.nan), float("nan"), 0, 0, "unsolved")
@@ -579,19 +590,20 @@ def merge_passes(fwd: list[PoseResult], bwd: list[PoseResult], lengths: np.ndarr
     return joints, results
 
 
-def solve_both_ways(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, progress=None
-                    ) -> tuple[np.ndarray, list[PoseResult]]:
+def solve_both_ways(rec: Reconstructor, markers: np.ndarray, t: np.ndarray, progress=None,
+                    loose: np.ndarray | None = None) -> tuple[np.ndarray, list[PoseResult]]:
     """Solve markers (F, 8, 3) at t (F,) s forwards with ``rec`` (fresh: exactly as live), then
     backwards in time with a solver for the subject it has (measured from the standard pose,
     or given), and merge the two per frame (:func:`merge_passes`): the temporal model sees the
     future too. Forwards only when rec has no subject or F < 2. Returns ((F, 13, 3) joints, the
-    PoseResult kept per frame). progress: optional callable(1) per solve."""
+    PoseResult kept per frame). progress: optional callable(1) per solve; loose: optional
+    (F, 8) bool, the markers whose position is rough (:meth:`Reconstructor.solve`)."""
     F = len(t)
-    fwd = solve_frames(rec, markers, t, range(F), progress)
+    fwd = solve_frames(rec, markers, t, range(F), progress, loose)
     if rec.subject is None or F < 2:
         return np.array([r.joints for r in fwd], float).reshape(F, N_JOINTS, 3), fwd
     # time runs backwards: feed -t so the solver sees increasing times
-    bwd = solve_frames(rec.again(rec.subject), markers, -np.asarray(t, float), range(F - 1, -1, -1), progress)
+    bwd = solve_frames(rec.again(rec.subject), markers, -np.asarray(t, float), range(F - 1, -1, -1), progress, loose)
     return merge_passes(fwd, bwd, rec.lengths, markers, rec.offsets)
 
 

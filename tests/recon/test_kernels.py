@@ -75,8 +75,8 @@ def test_lm_recovers_a_pose_from_its_markers():
     start /= np.linalg.norm(start, axis=1, keepdims=True)
     start[D["spine"], 2] = 0
     start[D["spine"]] /= np.linalg.norm(start[D["spine"]])
-    out = kernels.lm_solve(R, o + 0.02, start, LENGTHS, np.zeros((8, 3)), mu, W, np.eye(3), obs, np.ones(8, bool), 0.003,
-                           False,
+    out = kernels.lm_solve(R, o + 0.02, start, LENGTHS, np.zeros((8, 3)), mu, W, np.eye(3), obs, np.ones(8, bool),
+                           np.full(8, 0.003), False,
                            np.zeros((13, 3)), 1.0, kernels.G, 50, 1e-12)
     q = out[3]
     assert np.abs(q[list(kernels.MARKER_JOINTS)] - obs).max() < 1e-3

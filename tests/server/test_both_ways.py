@@ -9,7 +9,7 @@ from samba_common.calib import default_rig
 from samba_common.skeleton import MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
-from samba_server.both_ways import AGREED_S, APART_S, NEXT_S, PassResult, choose, relabel_both_ways
+from samba_server.both_ways import AGREED_S, APART_S, NEXT_S, PassResult, choose, loose_of, relabel_both_ways
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from samba_server.recon.reconstruct import Reconstructor
 from samba_server.server import Server, ServerConfig
@@ -389,3 +389,27 @@ def test_an_audit_that_kept_the_shoulders_does_not_settle_a_coin_flip():
     ren_f[200] = (1 << RW) | (1 << LS) | (1 << RS)  # a fresh look that renamed the shoulders
     _m, from_b = choose(fwd, bwd, t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(131, 200))
+
+
+def test_the_final_solve_weighs_each_chosen_marker_as_the_pass_that_named_it_said():
+    """A chosen name keeps the loose flag (position from merged blobs) of the pass that named the
+    marker at that point: the forward pass's where both did, the backward pass's where only
+    its name was taken; unnamed markers are not loose."""
+    rng = np.random.default_rng(1)
+    a = rng.normal(0.0, 1.0, (3, 8, 3))
+    b = a.copy()
+    b[1, LW] += 0.3  # the backward pass names the left wrist elsewhere in frame 1
+    loose_f = np.zeros((3, 8), bool)
+    loose_f[:, LW] = True  # the forward pass found its left wrist point only in merged blobs
+    loose_b = np.zeros((3, 8), bool)
+    loose_b[:, RK] = True
+    fwd = PassResult(a, np.zeros(3, np.int64), np.zeros(3), None, loose_f)
+    bwd = PassResult(b, np.zeros(3, np.int64), np.zeros(3), None, loose_b)
+    chosen = a.copy()
+    chosen[1, LW] = b[1, LW]  # taken from the backward pass
+    chosen[2, LA] = np.nan
+    got = loose_of(chosen, fwd, bwd)
+    assert got[[0, 2], LW].all() and not got[1, LW]
+    assert not got[:, RK].any()  # both passes name it there: the forward pass's word
+    assert not got[2, LA]
+    assert loose_of(chosen, PassResult(a, fwd.renamed, fwd.margin), PassResult(b, bwd.renamed, bwd.margin)) is None

@@ -151,6 +151,34 @@ def test_points_merged_blob_stands_for_two_markers_and_clutter_is_bounded():
     assert got.merged_all[np.argmin(np.linalg.norm(got.X - pts[-1], axis=1))]
 
 
+def test_markers_named_on_a_merged_blobs_point_are_loose_for_the_solver():
+    """Feet together: both ankles in one blob twice a marker's size in every view, one point
+    that stands for both (each ankle placed to its side of it). The solver is told those two
+    are rough (``Labeller.loose``), not the six markers seen apart; a name on no point of the
+    frame is rough too."""
+    from samba_server.labelling.rigid import LA, RA
+
+    rig = default_rig(4)
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("together", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    feet = pose[[LA, RA]].mean(axis=0)
+    rng = np.random.default_rng(3)
+    lab = Labeller(rig)
+    for i in range(20):
+        packets = []
+        for cam in rig.cameras:  # the six markers apart, then the two ankles: one blob of twice the area
+            uv = cam.project(np.vstack([pose[:6], feet[None]])) + rng.normal(0, 0.1, (7, 2))
+            packets.append(MarkerPacket(cam.name, 0, int(i / FPS * 1e9), 160, 120, 100,
+                                        np.full(7, UNLABELLED, np.uint8), uv.astype(np.float32),
+                                        np.array([9] * 6 + [20], np.uint16), np.zeros(7, np.uint8)))
+        named, _q = lab.label(packets, i / FPS)
+    assert np.linalg.norm(named[[LA, RA]] - pose[[LA, RA]], axis=1).max() < 0.05  # placed either side of it
+    assert lab.loose(named).tolist() == [False] * 6 + [True, True]
+    moved = named.copy()
+    moved[0] += 0.05  # a left shoulder on no point of the frame
+    moved[1] = np.nan
+    assert lab.loose(moved).tolist() == [True, False] + [False] * 4 + [True, True]
+
+
 @pytest.mark.parametrize("audit", [True, False])
 def test_tracking_gone_wrong_is_corrected_by_a_fresh_identification(audit):
     """Tracking that named a leg's markers on the other leg (as after a wrong guess from the
