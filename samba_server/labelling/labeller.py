@@ -7,10 +7,12 @@
    recently, else the reconstructed skeleton's joint, which the solver keeps moving with the
    body) and the points are named by an optimal assignment (Hungarian) of points to predicted
    markers within a gate that grows with the time since the marker was seen. The motes' labels
-   lower the cost of agreeing assignments a little: evidence, not orders. Crossed legs are
-   swapped back; assignments that break a rigid distance of the subject (:mod:`.rigid`) or turn
-   the facing faster than a body turns are dropped; markers left out are recovered from the
-   free points where their prediction or the rigid lengths put them, when the choice is clear;
+   lower the cost of agreeing assignments a little: evidence, not orders. A knee and the other
+   leg's ankle parting from one merged point take each other's point when that fits the shins
+   clearly better; crossed legs are swapped back; assignments that break a rigid distance of the
+   subject (:mod:`.rigid`) or turn the facing faster than a body turns are dropped; markers
+   left out are recovered from the free points where their prediction or the rigid lengths put
+   them, when the choice is clear;
 3. **identification** (:mod:`.identify`) when fewer than ``min_tracked`` markers can be
    predicted (the start of a take, after a blackout or once the subject left the volume), or
    when tracking explains too few of the points for ``lost_after`` s (a jump): the points are
@@ -111,6 +113,8 @@ class LabelConfig:
     facing_decay: float = 1.0  #: ... decaying with this time constant since it was known ...
     facing_turn_rate: float = 1.5  #: ... and free within this many rad/s since then (at most 90 degrees)
     first_facing_weight: float = 1.0  #: before any labelling: the standard pose faces +Y
+    part_s: float = 0.3  #: a knee and the other leg's ankle that shared a (merged) point this recently and now part ...
+    part_gain_m: float = 0.03  #: ... swap points when the shins fit this much better (m, both summed; inf: never)
     rigid_abs_tol: float = 0.05  #: rigid distances may differ by this ...
     rigid_rel_tol: float = 0.03  #: ... plus this fraction of half the body height
     points: PointsConfig = field(default_factory=PointsConfig)
@@ -197,6 +201,7 @@ class Labeller:
         #: (since, last frame's time, (8, 3) markers) of an unclear identification's best labelling
         self._steady: tuple[float, float, np.ndarray] | None = None
         self._shared = np.zeros(N_MARKERS, bool)
+        self._together: dict[tuple[int, int], float] = {}  # (m, n) markers -> when they last shared a point
         self._views: list = []  # this frame's blobs per camera (ViewBlobs)
         self._pts: Points3D | None = None  # this frame's 3D points
         self._knees_crossed_since: float | None = None
@@ -297,6 +302,7 @@ class Labeller:
         self._fit_swap = None
         self._refit = None
         self._glue = ([], [])
+        self._together = {}
 
     # ------------------------------------------------------------------ per frame
     def label(self, packets: list, t: float) -> tuple[np.ndarray, LabelQuality]:
@@ -456,6 +462,7 @@ class Labeller:
                     best = (dn, m)
             if best is not None:
                 assign[n], arow[n] = assign[best[1]], arow[best[1]]
+        self._part(pts, assign, arow, t)
         out = np.full((N_MARKERS, 3), np.nan)
         out[assign >= 0] = pts.X[assign[assign >= 0]]
         right = None
@@ -482,6 +489,9 @@ class Labeller:
             self._uncross_knees(out, assign, arow, right, t)
         self._split_shared(out, assign, pts, pred, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
+        for m, n in itertools.combinations(np.flatnonzero(self._shared).tolist(), 2):
+            if assign[m] == assign[n] and (m, n) in _KNEE_OTHER_ANKLE:
+                self._together[(m, n)] = t
         self._swap_for_shins(out, assign, arow, right)
         self._cross_for_shins(out, assign, arow, right, t)
         self._swap_arms(out, assign, arow, t)
@@ -514,6 +524,33 @@ class Labeller:
         self.stats.overridden += over
         resid = float(np.sqrt(np.mean(d_eff[arow[named], named] ** 2))) if named.size else float("nan")
         return out, LabelQuality(int(named.size), P, margin, resid, "tracking", over), assign
+
+    def _part(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, t: float) -> None:
+        """A knee and the other leg's ankle that shared a merged point within ``part_s`` and are
+        now named on two points take each other's point when that fits both shins by
+        ``part_gain_m`` better. Where they parted, both predictions stood at the merged point and
+        say little: a dancer's raised right ankle leaving the left knee took the knee's point
+        (the knee the ankle's, then dropped for its broken shin) for the rest of the step
+        (005_11, both held-out seeds). Only this pair: both its markers are held by a shin on
+        each side, while a wrist parting from a shoulder or a knee is not (tried for every pair
+        of markers not a left-right one: wrists and shoulders swapped wrongly as often as
+        rightly). assign, arow (8,) in place."""
+        cfg = self.config
+        self._together = {k: ts for k, ts in self._together.items() if t - ts <= cfg.part_s}
+        for m, n in list(self._together):
+            a, b = assign[m], assign[n]
+            if a < 0 or b < 0 or a == b:
+                continue
+            now = np.full((N_MARKERS, 3), np.nan)
+            now[assign >= 0] = pts.X[assign[assign >= 0]]
+            swapped = now.copy()
+            swapped[[m, n]] = now[[n, m]]
+            gain = self._body.shin_misfit(now) - self._body.shin_misfit(swapped)
+            if gain >= cfg.part_gain_m:
+                log.debug("t=%.3f s: %d and %d parted swapped: the shins fit %.3f m better", t, m, n, gain)
+                assign[[m, n]], arow[[m, n]] = assign[[n, m]], arow[[n, m]]
+                self._renamed |= (1 << m) | (1 << n)
+                del self._together[(m, n)]
 
     def _rescue(self, pts: Points3D, out: np.ndarray, assign: np.ndarray, pred: np.ndarray, t: float) -> int:
         """Markers tracked until the last frame (seen within ``track_timeout``) that no point
@@ -1419,6 +1456,8 @@ _FIT_MOVES = _FIT_SWAPS != np.arange(N_MARKERS)
 _MIRROR = len(_FIT_SWAPS) - 1  #: the row of _FIT_SWAPS naming every marker for its other side
 _LEGS = _FIT_SWAP_PAIRS.index(((LK, RK), (LA, RA)))  #: the row naming each leg for the other
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
+#: a knee and the other leg's ankle (:meth:`Labeller._part`)
+_KNEE_OTHER_ANKLE = {(LK, RA), (RK, LA)}
 
 
 def _disputed(labels: np.ndarray, rivals: list) -> np.ndarray:
