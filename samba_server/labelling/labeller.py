@@ -113,7 +113,7 @@ class LabelConfig:
     facing_decay: float = 1.0  #: ... decaying with this time constant since it was known ...
     facing_turn_rate: float = 1.5  #: ... and free within this many rad/s since then (at most 90 degrees)
     first_facing_weight: float = 1.0  #: before any labelling: the standard pose faces +Y
-    part_s: float = 0.3  #: a knee and the other leg's ankle that shared a (merged) point this recently and now part ...
+    part_s: float = 0.3  #: a knee and the other leg's ankle that shared a merged point this recently and now part ...
     part_gain_m: float = 0.03  #: ... swap points when the shins fit this much better (m, both summed; inf: never)
     rigid_abs_tol: float = 0.05  #: rigid distances may differ by this ...
     rigid_rel_tol: float = 0.03  #: ... plus this fraction of half the body height
@@ -534,9 +534,13 @@ class Labeller:
         (005_11, both held-out seeds). Only this pair: both its markers are held by a shin on
         each side, while a wrist parting from a shoulder or a knee is not (tried for every pair
         of markers not a left-right one: wrists and shoulders swapped wrongly as often as
-        rightly). assign, arow (8,) in place."""
+        rightly). With three cameras or more: with two, whose points are often ghosts, it lost
+        a climbing take (the 2-camera benchmark from 8 s: 001_08 41.5 -> 31.4 %) and gained
+        none. assign, arow (8,) in place."""
         cfg = self.config
         self._together = {k: ts for k, ts in self._together.items() if t - ts <= cfg.part_s}
+        if len(self.rig) < 3:
+            return
         for m, n in list(self._together):
             a, b = assign[m], assign[n]
             if a < 0 or b < 0 or a == b:
