@@ -1594,7 +1594,7 @@ def test_a_raised_foot_parting_from_the_other_knee_keeps_its_name(rule):
         renamed |= q.renamed
     right = _right(np.array(named), truth)
     assert right[:50].all()
-    apart = slice(len(truth) - 15, None)  # the foot lowered, 15-30 cm from the knee
+    apart = slice(len(truth) - 15, None)  # the foot lowered, 35-53 cm from the knee
     if rule:
         assert right[apart].all()
         assert renamed & (1 << LK) and renamed & (1 << RA)
