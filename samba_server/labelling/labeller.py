@@ -462,9 +462,9 @@ class Labeller:
                     best = (dn, m)
             if best is not None:
                 assign[n], arow[n] = assign[best[1]], arow[best[1]]
-        self._part(pts, assign, arow, t)
         out = np.full((N_MARKERS, 3), np.nan)
         out[assign >= 0] = pts.X[assign[assign >= 0]]
+        self._part(out, assign, arow, t)
         right = None
         if self._facing is not None and t - self._t_facing <= 0.5:
             right = right_of(self._facing)
@@ -525,7 +525,7 @@ class Labeller:
         resid = float(np.sqrt(np.mean(d_eff[arow[named], named] ** 2))) if named.size else float("nan")
         return out, LabelQuality(int(named.size), P, margin, resid, "tracking", over), assign
 
-    def _part(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, t: float) -> None:
+    def _part(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, t: float) -> None:
         """A knee and the other leg's ankle that shared a merged point within ``part_s`` and are
         now named on two points take each other's point when that fits both shins by
         ``part_gain_m`` better. Where they parted, both predictions stood at the merged point and
@@ -536,23 +536,21 @@ class Labeller:
         of markers not a left-right one: wrists and shoulders swapped wrongly as often as
         rightly). With three cameras or more: with two, whose points are often ghosts, it lost
         a climbing take (the 2-camera benchmark from 8 s: 001_08 41.5 -> 31.4 %) and gained
-        none. assign, arow (8,) in place."""
+        none. out (8, 3), assign, arow (8,) in place."""
         cfg = self.config
         self._together = {k: ts for k, ts in self._together.items() if t - ts <= cfg.part_s}
         if len(self.rig) < 3:
             return
         for m, n in list(self._together):
-            a, b = assign[m], assign[n]
-            if a < 0 or b < 0 or a == b:
+            if assign[m] < 0 or assign[n] < 0 or assign[m] == assign[n]:
                 continue
-            now = np.full((N_MARKERS, 3), np.nan)
-            now[assign >= 0] = pts.X[assign[assign >= 0]]
-            swapped = now.copy()
-            swapped[[m, n]] = now[[n, m]]
-            gain = self._body.shin_misfit(now) - self._body.shin_misfit(swapped)
+            swapped = out.copy()
+            swapped[[m, n]] = out[[n, m]]
+            gain = self._body.shin_misfit(out) - self._body.shin_misfit(swapped)
             if gain >= cfg.part_gain_m:
                 log.debug("t=%.3f s: %d and %d parted swapped: the shins fit %.3f m better", t, m, n, gain)
-                assign[[m, n]], arow[[m, n]] = assign[[n, m]], arow[[n, m]]
+                for a in (out, assign, arow):
+                    a[[m, n]] = a[[n, m]]
                 self._renamed |= (1 << m) | (1 << n)
                 del self._together[(m, n)]
 
