@@ -206,6 +206,7 @@ class Labeller:
         self._pts: Points3D | None = None  # this frame's 3D points
         self._knees_crossed_since: float | None = None
         self._cross_since: float | None = None  # since when the shins fit clearly better crossed
+        self._cross_seen = -np.inf  # when the crossed-feet check could last be made
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
         self._fit_swap: tuple[int, float] | None = None  # (row of _FIT_SWAPS, since when) that makes the names fit a body better
         self._t_fit = -np.inf  # last database-fit check
@@ -298,6 +299,7 @@ class Labeller:
         """Forget what the swap rules saw held over time: it was about the names before."""
         self._knees_crossed_since = None
         self._cross_since = None
+        self._cross_seen = -np.inf
         self._arm_swap_since = [None, None]
         self._fit_swap = None
         self._refit = None
@@ -839,13 +841,19 @@ class Labeller:
         round for 3.5 s, tight fits that no bound flags. The knees keep their order (thighs
         hardly cross, feet often do), unless they are named crossed: then they swap. Three
         cameras or more (with two, ghost points break shins as often), and the subject measured
-        (a child's feet together, 12 cm apart, fit an adult's shin better crossed). out (8, 3),
-        assign, arow (8,) in place."""
+        (a child's feet together, 12 cm apart, fit an adult's shin better crossed). Frames where
+        the check cannot be made (a leg marker unnamed, or on a merged point), at most ``cross_s``
+        since the last that could, neither break nor count against the hold: a knee hidden every
+        few frames restarted it, so that it never held (traced on a dance from 8 s on another
+        body, 005_18). out (8, 3), assign, arow (8,) in place."""
         holds = False
         if right is not None and len(self.rig) >= 3 and self._body.measured and _legs_apart(assign):
             named, crossed = _shin_errors(self._body, out)
             holds = max(crossed) <= self.config.cross_fit * self._body.tol and \
                 sum(named) - sum(crossed) >= self.config.cross_gain_m
+            self._cross_seen = t
+        elif self._cross_since is not None and t - self._cross_seen <= self.config.cross_s:
+            return  # the legs not all named on points of their own this frame: the hold goes on
         since = self._cross_since = _held_since(self._cross_since, holds, t)
         if since is not None and t - since >= self.config.cross_s:
             pair = _swapped_pair(out, right)
