@@ -475,7 +475,9 @@ class Labeller:
             # unless swapping it makes the shins fit worse (feet staggered in a stance turned
             # against the shoulders put the right ankle left of the left one, the knees not).
             # Legs tracked frame to frame may cross (a crossover step): they are swapped only
-            # when that makes the shins fit clearly better
+            # when that makes the shins fit clearly better; with one shin to go by (a knee
+            # unnamed, the other perhaps on a merged point between the knees) by as much as
+            # the feet must fit better to be named crossed (cross_gain_m)
             crossed = [(lm, rm) for lm, rm in ((LK, RK), (LA, RA))
                        if assign[lm] >= 0 and assign[rm] >= 0 and assign[lm] != assign[rm]
                        and float((out[rm] - out[lm]) @ right) < -cfg.crossed_m]
@@ -484,6 +486,8 @@ class Labeller:
                 for lm, rm in crossed:
                     swapped[[lm, rm]] = out[[rm, lm]]
                 slack = 0.02 if any(stale[m] for pair in crossed for m in pair) else -0.005
+                if slack < 0 and not np.isfinite(out[[LK, RK, LA, RA]]).all():
+                    slack = -cfg.cross_gain_m
                 if self._body.shin_misfit(swapped) <= self._body.shin_misfit(out) + slack:
                     for lm, rm in crossed:
                         self._renamed |= (1 << lm) | (1 << rm)

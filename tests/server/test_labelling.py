@@ -746,6 +746,29 @@ def test_feet_held_crossed_are_named_crossed_while_a_knee_flickers():
     assert right[int(70 + 0.25 * FPS):].all()
 
 
+@pytest.mark.parametrize("one_shin_gain", [True, False])
+def test_crossed_feet_are_not_uncrossed_on_the_word_of_one_knee_between_the_knees(one_shin_gain):
+    """Feet held crossed, named so. Then for half a second the knees are one merged blob every
+    third frame: the right knee unseen, the left knee's point halfway to it (the merged blob's
+    centroid sits between them). There that one shin fits the other ankle 2.4 cm better, and
+    "legs do not cross" took it for a swap (a dance from 8 s on another body, 005_18: ankles
+    named the wrong way round for 1.1 s). With one shin to go by, an uncrossing must fit
+    ``cross_gain_m`` better, as the crossing does; with both, half a centimetre."""
+    from samba_server.labelling.rigid import LA, LK, RA, RK
+
+    rig = default_rig(4)
+    stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
+    hold = _legs_pose(np.array([0.17, -0.30]), np.array([0.0, -0.06]), left_knee_lift=-0.05)
+    truth = _blend(stand, hold, 130, 10, 40)
+    seen = truth.copy()
+    seen[80:110:3, LK] = 0.5 * (truth[80:110:3, LK] + truth[80:110:3, RK])
+    seen[80:110:3, RK] = np.nan
+    lab = Labeller(rig, config=LabelConfig() if one_shin_gain else replace(LabelConfig(), cross_gain_m=0.005))
+    lab.set_lengths(DEFAULT_LENGTHS)
+    right = _right(_run(lab, rig, seen, np.random.default_rng(1)), truth)[:, [LA, RA]].all(axis=1)
+    assert right[:80].all()
+    assert right[80:].all() == one_shin_gain
+
 def test_feet_held_crossed_through_a_blackout_are_identified_crossed_again():
     """A dancer stands on her right foot through a 1 s blackout, the left one pointed out behind
     and across it (points of a rendered take, traced: 005_12 from 8 s, seed 11). Named crossed
