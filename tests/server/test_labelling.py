@@ -733,14 +733,7 @@ def test_feet_held_crossed_are_named_crossed_while_a_knee_flickers():
     seen = truth.copy()
     seen[72::3, LK] = np.nan
     lab = _measured(rig, True)
-    named = []
-    rng = np.random.default_rng(12)
-    for i, m in enumerate(seen):
-        if i == 70:
-            for a in (lab._pos, lab._vel):
-                a[[LA, RA]] = a[[RA, LA]]
-        named.append(lab.label(_packets(rig, m, i / FPS, rng), i / FPS)[0])
-    right = _right(np.array(named), truth)
+    right = _right(_run_swapping_tracks(lab, rig, seen, np.random.default_rng(12), 70, [LA, RA]), truth)
     right[:, LK] |= ~np.isfinite(seen[:, LK]).all(axis=1)
     assert right[:70].all()
     assert right[int(70 + 0.25 * FPS):].all()
@@ -768,6 +761,7 @@ def test_crossed_feet_are_not_uncrossed_on_the_word_of_one_knee_between_the_knee
     right = _right(_run(lab, rig, seen, np.random.default_rng(1)), truth)[:, [LA, RA]].all(axis=1)
     assert right[:80].all()
     assert right[80:].all() == one_shin_gain
+
 
 def test_feet_held_crossed_through_a_blackout_are_identified_crossed_again():
     """A dancer stands on her right foot through a 1 s blackout, the left one pointed out behind
