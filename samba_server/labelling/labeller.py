@@ -496,8 +496,8 @@ class Labeller:
             self._uncross_knees(out, assign, arow, right, t)
         self._split_shared(out, assign, pts, pred, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
-        for m, n in itertools.combinations(np.flatnonzero(self._shared).tolist(), 2):
-            if assign[m] == assign[n] and (m, n) in _KNEE_OTHER_ANKLE:
+        for m, n in _KNEE_OTHER_ANKLE:
+            if assign[m] >= 0 and assign[m] == assign[n]:
                 self._together[(m, n)] = t
         self._swap_for_shins(out, assign, arow, right)
         self._cross_for_shins(out, assign, arow, right, t)

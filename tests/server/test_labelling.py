@@ -689,6 +689,15 @@ def test_ankles_swapped_where_one_knee_is_a_shin_from_both_are_swapped_back(rule
         assert not any(renamed)
 
 
+def _feet_crossed_hold(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 8, 3) markers of the hip-width standard pose moving over 40 frames from frame 10 to
+    the hold (8, 3) also returned: on the right foot, the left one raised behind and across it
+    (the ankles crossed, the knees not)."""
+    stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
+    hold = _legs_pose(np.array([0.17, -0.30]), np.array([0.0, -0.06]), left_knee_lift=-0.05)
+    return _blend(stand, hold, n, 10, 40), hold
+
+
 @pytest.mark.parametrize("rule", [True, False])
 def test_feet_held_crossed_but_named_side_by_side_are_named_crossed(rule):
     """A dancer holds a pose on her right foot, the left one raised behind and across it (traced
@@ -699,9 +708,7 @@ def test_feet_held_crossed_but_named_side_by_side_are_named_crossed(rule):
     from samba_server.labelling.rigid import LA, LK, RA, RK
 
     rig = default_rig(4)
-    stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
-    hold = _legs_pose(np.array([0.17, -0.30]), np.array([0.0, -0.06]), left_knee_lift=-0.05)
-    truth = _blend(stand, hold, 150, 10, 40)
+    truth, hold = _feet_crossed_hold(150)
     lab = _measured(rig, rule, cross_s=float("inf"))
     body = lab._body
     named_so = hold.copy()
@@ -727,9 +734,7 @@ def test_feet_held_crossed_are_named_crossed_while_a_knee_flickers():
     from samba_server.labelling.rigid import LA, LK, RA
 
     rig = default_rig(4)
-    stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
-    hold = _legs_pose(np.array([0.17, -0.30]), np.array([0.0, -0.06]), left_knee_lift=-0.05)
-    truth = _blend(stand, hold, 150, 10, 40)
+    truth, _hold = _feet_crossed_hold(150)
     seen = truth.copy()
     seen[72::3, LK] = np.nan
     lab = _measured(rig, True)
@@ -750,14 +755,11 @@ def test_crossed_feet_are_not_uncrossed_on_the_word_of_one_knee_between_the_knee
     from samba_server.labelling.rigid import LA, LK, RA, RK
 
     rig = default_rig(4)
-    stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
-    hold = _legs_pose(np.array([0.17, -0.30]), np.array([0.0, -0.06]), left_knee_lift=-0.05)
-    truth = _blend(stand, hold, 130, 10, 40)
+    truth, _hold = _feet_crossed_hold(130)
     seen = truth.copy()
     seen[80:110:3, LK] = 0.5 * (truth[80:110:3, LK] + truth[80:110:3, RK])
     seen[80:110:3, RK] = np.nan
-    lab = Labeller(rig, config=LabelConfig() if one_shin_gain else replace(LabelConfig(), cross_gain_m=0.005))
-    lab.set_lengths(DEFAULT_LENGTHS)
+    lab = _measured(rig, one_shin_gain, cross_gain_m=0.005)
     right = _right(_run(lab, rig, seen, np.random.default_rng(1)), truth)[:, [LA, RA]].all(axis=1)
     assert right[:80].all()
     assert right[80:].all() == one_shin_gain
