@@ -71,6 +71,7 @@ class LabelConfig:
     rescue_max_s: float = 1.0  #: ... for at most this long after it was last named on a point
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
+    recover_speed: float = 6.0  #: ... a shoulder or wrist named t s ago within gate_m + this (m/s) * t of it (inf: no limit)
     wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
     glued_wrist_s: float = 0.3  #: a wrist held a shoulder width from the other shoulder this long, its own shoulder unnamed, is that shoulder
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
@@ -633,7 +634,11 @@ class Labeller:
         about it) would otherwise never be found again.
 
         A point that is surely a marker (>= 3 views, or no view missing it) is a candidate for a
-        marker within ``recover_gate_m`` of its prediction; it, or a 2-view point that one
+        marker within ``recover_gate_m`` of its prediction (a shoulder or wrist within
+        ``gate_m`` + ``recover_speed`` times the time since it was last named: how far it can
+        have gone; a climber's shoulder and hand level with the cameras, whose blobs pair up
+        across the views either way, were named on the other pairing's two points, 30-35 cm
+        off their predictions, a frame after both were last named); it, or a 2-view point that one
         other view misses, is a candidate where the named markers put it: a shoulder a shoulder
         width from the other along the subject's right, a knee a shin above its ankle, an ankle
         a shin below its knee. The candidates are assigned optimally; a pair is kept when the
@@ -660,7 +665,10 @@ class Labeller:
         for j, m in enumerate(lost):
             if np.isfinite(pred[m]).all():
                 d = np.linalg.norm(X - pred[m], axis=1)
-                cost[:, j] = np.where((d <= cfg.recover_gate_m) & (doubt == 0), d, np.inf)
+                reach = cfg.recover_gate_m
+                if m in (LS, RS, LW, RW):  # (knees in a kick outrun their predictions: 005_05 lost 2.4 points)
+                    reach = min(reach, cfg.gate_m + cfg.recover_speed * (self._t_frame - self._seen[m]))
+                cost[:, j] = np.where((d <= reach) & (doubt == 0), d, np.inf)
             anchor = np.full(len(free), np.inf)
             if m in (LS, RS) and right is not None:
                 other, sign = (RS, -1.0) if m == LS else (LS, 1.0)
