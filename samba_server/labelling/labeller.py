@@ -71,7 +71,7 @@ class LabelConfig:
     rescue_max_s: float = 1.0  #: ... for at most this long after it was last named on a point
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
     recover_margin_m: float = 0.10  #: ... when the best assignment without that pair costs this much more
-    recover_speed: float = 6.0  #: ... a shoulder or wrist named t s ago within gate_m + this (m/s) * t of it (inf: no limit)
+    recover_speed: float = 6.0  #: ... a shoulder or wrist within gate_m + this (m/s) x its time unnamed (inf: no limit)
     wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
     glued_wrist_s: float = 0.3  #: a wrist held a shoulder width from the other shoulder this long, its own shoulder unnamed, is that shoulder
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
