@@ -576,7 +576,7 @@ class Labeller:
         out (8, 3), assign (8,) (the point per marker, -1 none) from tracking; pred (8, 3). Fills
         out in place; returns how many markers it named. Three cameras or more: with two, a
         marker the points stage left without a point is mostly a ghost pair it rejected
-        (swordplay lost 8 points). Shoulders and wrists only (:data:`_RESCUED`): a knee or ankle
+        (swordplay lost 8 points). Shoulders and wrists only (:data:`_UPPER`): a knee or ankle
         that goes unnamed for a frame is how the legs' swap rules get to see a swapped pair (a
         dance's legs, named the other way round after a blackout, kept those names 0.8 s
         longer when the left knee was rescued on the right knee's blobs)."""
@@ -585,7 +585,7 @@ class Labeller:
         if cfg.rescue_m <= 0 or C < 3:
             return 0
         age = t - self._seen
-        todo = [m for m in _RESCUED if assign[m] < 0 and not np.isfinite(out[m]).all()
+        todo = [m for m in _UPPER if assign[m] < 0 and not np.isfinite(out[m]).all()
                 and age[m] <= cfg.track_timeout and np.isfinite(pred[m]).all()
                 and t - self._on_point[m] <= cfg.rescue_max_s]
         if not todo:
@@ -666,7 +666,7 @@ class Labeller:
             if np.isfinite(pred[m]).all():
                 d = np.linalg.norm(X - pred[m], axis=1)
                 reach = cfg.recover_gate_m
-                if m in (LS, RS, LW, RW):  # (knees in a kick outrun their predictions: 005_05 lost 2.4 points)
+                if m in _UPPER:  # (knees in a kick outrun their predictions: 005_05 lost 2.4 points)
                     reach = min(reach, cfg.gate_m + cfg.recover_speed * (self._t_frame - self._seen[m]))
                 cost[:, j] = np.where((d <= reach) & (doubt == 0), d, np.inf)
             anchor = np.full(len(free), np.inf)
@@ -1432,8 +1432,9 @@ def _nearest(X: np.ndarray, Y: np.ndarray) -> np.ndarray:
     return np.min(np.linalg.norm(X[:, None] - Y[None], axis=2), axis=1)
 
 
-#: markers :meth:`Labeller._rescue` looks for in the blobs
-_RESCUED = (LS, RS, LW, RW)
+#: shoulders and wrists: the markers :meth:`Labeller._rescue` looks for in the blobs, and those
+#: :meth:`Labeller._recover` finds only as far off as they can have moved
+_UPPER = (LS, RS, LW, RW)
 
 #: per side: (its shoulder, its wrist, the other shoulder)
 _ARMS = ((LS, LW, RS), (RS, RW, LS))

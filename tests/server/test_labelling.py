@@ -1165,15 +1165,10 @@ def test_a_hand_lost_for_a_frame_is_not_named_where_it_cannot_have_gone(speed):
     truth = joints[:, list(MARKER_JOINT)]
     lab = Labeller(rig, config=LabelConfig(recover_speed=speed))
     lab.set_lengths(DEFAULT_LENGTHS)
-    rng = np.random.default_rng(3)
-    named = []
-    for k in range(len(truth)):
-        m = truth[k]
-        if k == 60:
-            m = np.vstack([m, m[LW] + [0.0, 0.0, 0.3], m[RS] + [0.0, 0.0, -0.3]])
-            m[[LW, RS]] = np.nan
-        named.append(lab.label(_packets(rig, m, k / FPS, rng), k / FPS)[0])
-    named = np.array(named)
+    frames = list(truth)
+    frames[60] = np.vstack([truth[60], truth[60, LW] + [0.0, 0.0, 0.3], truth[60, RS] + [0.0, 0.0, -0.3]])
+    frames[60][[LW, RS]] = np.nan
+    named = _run(lab, rig, frames, np.random.default_rng(3))
     right = _right(named, truth)
     wrong = np.isfinite(named).all(axis=2) & ~right
     assert right[:60].all()
