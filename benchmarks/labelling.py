@@ -26,6 +26,7 @@ blackout, solved the same way: forwards and backwards merged, or forwards only w
     python benchmarks/labelling.py [--data ../shared/data/cmu-bvh] [--cameras 4 2] [--codec mjpg]
     python benchmarks/labelling.py --start 8   # the clips' later parts, which the default never runs
     python benchmarks/labelling.py --body-scale 0.75   # child-sized bodies (1.25: very tall adults)
+    python benchmarks/labelling.py --calibration benchmarks/rigs/high.toml   # another rig than samba-sim's
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _record import record  # noqa: E402
 
-from samba_common.calib import default_rig  # noqa: E402
+from samba_common.calib import CameraRig, default_rig  # noqa: E402
 from samba_common.skeleton import MARKER_JOINT  # noqa: E402
 from samba_mote.sim.render import SimConfig  # noqa: E402
 from samba_mote.sim.take import load_motion, make_take, prepare_motion  # noqa: E402
@@ -105,6 +106,16 @@ def true_marker_reference(truth: np.ndarray, t: np.ndarray, blackout: np.ndarray
     return (float(err[ok].mean()) if ok.any() else nan), share, share_sure
 
 
+def rig_text(rig: CameraRig) -> str:
+    """One line on a rig for the record: its cameras' heights and horizontal distances from the
+    origin (m) and focal lengths (px)."""
+    c = np.array([cam.center for cam in rig])
+    f = [float(cam.matrix[0, 0]) for cam in rig]
+    return (f"{len(rig)} cameras at {c[:, 2].min():.1f}-{c[:, 2].max():.1f} m height, "
+            f"{np.hypot(c[:, 0], c[:, 1]).min():.1f}-{np.hypot(c[:, 0], c[:, 1]).max():.1f} m from the centre, "
+            f"fx {min(f):g}-{max(f):g} px")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--data", default=str(Path(__file__).resolve().parents[1].parent / "shared/data/cmu-bvh"))
@@ -122,8 +133,14 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--one-pass", action="store_true",
                     help="label forwards only (samba-process --one-pass, as live); default: both ends, as samba-process")
+    ap.add_argument("--calibration", type=Path, default=None,
+                    help="render and label through this rig (calibration.toml; --cameras is then its camera count) "
+                         "instead of samba-sim's default rig, e.g. benchmarks/rigs/high.toml")
     ap.add_argument("--no-record", action="store_true", help="do not write docs/BENCHMARKS.md")
     args = ap.parse_args()
+    own_rig = CameraRig.load(args.calibration) if args.calibration is not None else None
+    if own_rig is not None:
+        args.cameras = [len(own_rig)]
     data = Path(args.data)
     files = sorted(data.glob("*.bvh"))
     if not files:
@@ -158,7 +175,7 @@ def main() -> int:
             cfg = base if args.blackout <= 0 else replace(
                 base, blackout=((lead_s + 0.5 * motion_s - 0.5 * args.blackout, args.blackout),))
             with tempfile.TemporaryDirectory() as tmp:
-                take = make_take(tmp, joints, rig=default_rig(n_cam), config=cfg, t=t, seed=args.seed)
+                take = make_take(tmp, joints, rig=own_rig if own_rig is not None else default_rig(n_cam), config=cfg, t=t, seed=args.seed)
                 videos = [take.video(c.name) for c in take.cameras]
                 server = Server(take.rig, None, Reconstructor(db=db), ServerConfig(max_lag_ms=0.0), configs.sync,
                                 configs.triangulate, configs.labelling)
@@ -235,9 +252,12 @@ def main() -> int:
         size = args.body_scale
         if size is not None:
             title += f", bodies x{size:g} (--body-scale {size:g})"
+        if own_rig is not None:
+            title += f", rig {args.calibration.stem} (--calibration)"
         record(title,
                [f"Held-out subjects (database without the clip's subject), "
                 f"{'bodies varied' if size is None else f'bodies x{size:g} the subject (bone types varied)'}, "
+                f"{'' if own_rig is None else f'the rig of {args.calibration.name} ({rig_text(own_rig)}), '}"
                 f"samba-sim defaults (feet at hip "
                 f"width, standard pose in the middle of the volume and a continuous walk into the clip, occlusion by the "
                 f"body, distractors, noise), {args.blackout:g} s blackout mid-motion, {args.codec.upper()} videos through "
