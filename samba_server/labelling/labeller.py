@@ -1069,9 +1069,15 @@ class Labeller:
         return out[0], out[1]
 
     @staticmethod
-    def _trust(pts: Points3D) -> np.ndarray:
-        """(M,) identification penalty per point: 0 from >= 3 views, else for the views that missed it."""
-        return np.where(pts.n_views >= 3, 0.0, np.minimum(0.9 * pts.unexplained, 2.0))
+    def _trust(pts: Points3D, standard: bool = False) -> np.ndarray:
+        """(M,) identification penalty per point: 0 from >= 3 views, else for the views that missed
+        it; standard (the subject not measured yet: the standard pose), not for the views where
+        it is hidden behind a point seen by >= 3 views (``Points3D.behind``: the far knee seen
+        from the side; later a ghost between two hands on a hilt falls there too)."""
+        missed = pts.unexplained
+        if standard and pts.behind is not None:
+            missed = missed - pts.behind
+        return np.where(pts.n_views >= 3, 0.0, np.minimum(0.9 * missed, 2.0))
 
     def _audit(self, pts: Points3D, tracked_out: np.ndarray, assign: np.ndarray, q: LabelQuality,
                t: float) -> tuple[np.ndarray, LabelQuality] | None:
@@ -1253,7 +1259,8 @@ class Labeller:
         hint = self._hint(t)
         if len(self.rig) >= 3:  # with two, ghosts cross legs as often (a dance 43 -> 24 %)
             hint.crossed = self._crossed_before(t)
-        hyps = identify(pts.X, self._trust(pts), self._raised(pts), hint, shared=pts.merged_all)
+        hyps = identify(pts.X, self._trust(pts, not self._body.measured), self._raised(pts), hint,
+                        shared=pts.merged_all)
         if not hyps:
             self._t_ambiguous = self._steady = None
             return None

@@ -54,6 +54,7 @@ class PointsConfig:
 
     epipolar_px: float = 1.5  #: a blob pair matches within this distance to the epipolar lines
     support_px: float = 2.0  #: a third view supports a point with a blob this close to its projection
+    behind_m: float = 0.03  #: m: farther than a sure point (>= 3 views) whose blob it falls on: hidden behind it
     merged_px_per_radius: float = 0.8  #: extra tolerance of a merged blob, times its radius
     min_separation_m: float = 0.035  #: two accepted points are never closer
     z_min: float = -0.3  #: capture volume, metres (world Z up, floor at 0) ...
@@ -80,7 +81,9 @@ class Points3D:
     frame's typical point), so it is likely the midpoint of two markers no view separates;
     n_merged: (P,) views that saw it in a merged blob; mirrored: (P,) the point was seen only in
     merged blobs it shares with other points and was placed by reflection (see
-    :meth:`PointReconstructor._mirror`) or on the blobs' far ends (:meth:`PointReconstructor._to_ends`).
+    :meth:`PointReconstructor._mirror`) or on the blobs' far ends (:meth:`PointReconstructor._to_ends`);
+    behind: (P,) of the unexplained views, those where the point falls on the blob of a point seen
+    by >= 3 views nearer that camera (:meth:`PointReconstructor._behind`), or None.
     """
 
     X: np.ndarray
@@ -93,6 +96,7 @@ class Points3D:
     merged_all: np.ndarray
     n_merged: np.ndarray
     mirrored: np.ndarray
+    behind: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.X)
@@ -331,8 +335,33 @@ class PointReconstructor:
             if ref.size:
                 merged_all = med >= cfg.double_size_ratio * percentile(ref, 40.0)
         merged_all &= ~mirrored & ~parted
-        return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing[idx].astype(np.int64), blob,
-                        votes, n_merged > 0, merged_all, n_merged, mirrored)
+        missing = missing[idx].astype(np.int64)
+        behind = np.minimum(self._behind(views, X[idx], n_views[idx], blob), missing)
+        return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing, blob,
+                        votes, n_merged > 0, merged_all, n_merged, mirrored, behind)
+
+    def _behind(self, views: list[ViewBlobs], X: np.ndarray, n_views: np.ndarray, blob: np.ndarray) -> np.ndarray:
+        """(P,) per point of 2 views, the views it is hidden in behind a sure point (>= 3
+        views): not its own, but the blob of a sure point at least ``behind_m`` nearer that
+        camera covers its projection (within the blob's radius plus ``support_px``): the far
+        knee of a standard pose seen from the side: explained, not missing, but a ghost may
+        fall there too (two hands on a sword hilt), so only the standard pose's naming counts it. X (P, 3) m; n_views (P,); blob (C, P) each point's blob per
+        view (-1: none)."""
+        out = np.zeros(len(X), np.int64)
+        sure = n_views >= 3
+        if not sure.any() or sure.all():
+            return out
+        proj, depth = self.tri.project(X)  # (C, P, 2), (C, P)
+        for c, v in enumerate(views):
+            front = np.flatnonzero(sure & (blob[c] >= 0))
+            if not front.size:
+                continue
+            b = blob[c, front]
+            d = np.linalg.norm(proj[c, :, None, :] - v.uv[b][None], axis=2)  # (P, front)
+            hid = (d <= v.radius[b][None] + self.config.support_px) & \
+                (depth[c, front][None] < depth[c][:, None] - self.config.behind_m)
+            out += (~sure & (blob[c] < 0) & hid.any(axis=1) & (depth[c] > 0.1)).astype(np.int64)
+        return out
 
     def _to_ends(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
                  uv: np.ndarray, views: list[ViewBlobs]) -> tuple[set[tuple[int, int]], np.ndarray, list]:

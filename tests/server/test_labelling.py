@@ -18,7 +18,7 @@ from samba_server.labelling import Labeller
 from samba_server.labelling.labeller import LabelConfig
 from samba_server.labelling.blobs import view_blobs
 from samba_server.labelling.points import PointReconstructor, Points3D
-from samba_server.labelling.rigid import LS, LW, RS, RW
+from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from samba_server.triangulate import Triangulator
 
 FPS = 60.0
@@ -1674,3 +1674,37 @@ def test_a_raised_foot_parting_from_the_other_knee_keeps_its_name(rule):
         assert renamed & (1 << LK) and renamed & (1 << RA)
     else:
         assert not right[apart][:, [LK, RA]].any()
+
+
+@pytest.mark.parametrize("behind_m", [0.03, float("inf")])
+def test_a_standard_pose_seen_from_the_side_names_both_legs_at_once(behind_m):
+    """Cameras at uneven heights, two looking at the standard pose from the side
+    (benchmarks/rigs/mixed.toml), rendered with the body hiding markers: there the far knee
+    and ankle hide behind the near ones, so one leg's points are seen by two views and have no
+    blob of their own in a third. Counted as missed by that view, they looked like ghosts and
+    the first naming left both legs unnamed (1.3 s on a rendered take). Hidden behind a point
+    seen by >= 3 views (``behind_m`` nearer the camera) the view is explained, and all eight
+    are named from the first frame (``behind_m`` inf: the old count, the legs wait)."""
+    from pathlib import Path
+
+    from samba_common.calib import CameraRig
+    from samba_mote.sim.render import render_take
+    from samba_server.process import process_frames
+    from samba_server.server import Server, ServerConfig
+
+    rig = CameraRig.load(Path(__file__).resolve().parents[2] / "benchmarks" / "rigs" / "mixed.toml")
+    joints = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))
+    F = 6
+    joints, t = np.repeat(joints[None], F, axis=0), np.arange(F) / FPS
+    cams = render_take(joints, t, rig, seed=3)
+    cfg = LabelConfig()
+    cfg = replace(cfg, points=replace(cfg.points, behind_m=behind_m))
+    server = Server(rig, None, None, ServerConfig(max_lag_ms=0.0), label_config=cfg)
+    _est, _t, extra = process_frames(server, [c.name for c in cams], [c.frames for c in cams], FPS)
+    truth = joints[:, list(MARKER_JOINT)]
+    named = _right(extra["markers"], truth, 0.03)
+    assert not (np.isfinite(extra["markers"]).all(axis=2) & ~named).any()  # never a wrong name
+    if np.isfinite(behind_m):
+        assert named.all()
+    else:
+        assert named[:, [LS, RS, LW, RW]].all() and not named[:, [LK, RK, LA, RA]].any()
