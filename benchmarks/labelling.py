@@ -175,7 +175,8 @@ def main() -> int:
             cfg = base if args.blackout <= 0 else replace(
                 base, blackout=((lead_s + 0.5 * motion_s - 0.5 * args.blackout, args.blackout),))
             with tempfile.TemporaryDirectory() as tmp:
-                take = make_take(tmp, joints, rig=own_rig if own_rig is not None else default_rig(n_cam), config=cfg, t=t, seed=args.seed)
+                rig = own_rig if own_rig is not None else default_rig(n_cam)
+                take = make_take(tmp, joints, rig=rig, config=cfg, t=t, seed=args.seed)
                 videos = [take.video(c.name) for c in take.cameras]
                 server = Server(take.rig, None, Reconstructor(db=db), ServerConfig(max_lag_ms=0.0), configs.sync,
                                 configs.triangulate, configs.labelling)

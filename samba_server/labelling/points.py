@@ -344,9 +344,9 @@ class PointReconstructor:
         """(P,) per point of 2 views, the views it is hidden in behind a sure point (>= 3
         views): not its own, but the blob of a sure point at least ``behind_m`` nearer that
         camera covers its projection (within the blob's radius plus ``support_px``): the far
-        knee of a standard pose seen from the side: explained, not missing, but a ghost may
-        fall there too (two hands on a sword hilt), so only the standard pose's naming counts it. X (P, 3) m; n_views (P,); blob (C, P) each point's blob per
-        view (-1: none)."""
+        knee of a standard pose seen from the side. Explained, not missing; but a ghost may
+        fall there too (two hands on a sword hilt), so only the standard pose's naming counts
+        it. X (P, 3) m; n_views (P,); blob (C, P) each point's blob per view (-1: none)."""
         out = np.zeros(len(X), np.int64)
         sure = n_views >= 3
         if not sure.any() or sure.all():
