@@ -315,7 +315,7 @@ class PointReconstructor:
         votes = np.zeros((len(idx), 8), np.int64)
         n_merged = np.zeros(len(idx), np.int64)
         size = np.full((C, len(idx)), np.nan)  # blob area x (depth / f)^2: m^2, the marker's apparent size
-        depth = self.tri.project(X[idx])[1]  # (C, P) m
+        proj, depth = self.tri.project(X[idx])  # (C, P, 2) px, (C, P) m
         for c in range(C):
             has = blob[c] >= 0
             if not has.any():
@@ -336,22 +336,23 @@ class PointReconstructor:
                 merged_all = med >= cfg.double_size_ratio * percentile(ref, 40.0)
         merged_all &= ~mirrored & ~parted
         missing = missing[idx].astype(np.int64)
-        behind = np.minimum(self._behind(views, X[idx], n_views[idx], blob), missing)
+        behind = self._behind(views, proj, depth, n_views[idx], blob, missing)
         return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing, blob,
                         votes, n_merged > 0, merged_all, n_merged, mirrored, behind)
 
-    def _behind(self, views: list[ViewBlobs], X: np.ndarray, n_views: np.ndarray, blob: np.ndarray) -> np.ndarray:
-        """(P,) per point of 2 views, the views it is hidden in behind a sure point (>= 3
-        views): not its own, but the blob of a sure point at least ``behind_m`` nearer that
-        camera covers its projection (within the blob's radius plus ``support_px``): the far
-        knee of a standard pose seen from the side. Explained, not missing; but a ghost may
-        fall there too (two hands on a sword hilt), so only the standard pose's naming counts
-        it. X (P, 3) m; n_views (P,); blob (C, P) each point's blob per view (-1: none)."""
-        out = np.zeros(len(X), np.int64)
+    def _behind(self, views: list[ViewBlobs], proj: np.ndarray, depth: np.ndarray, n_views: np.ndarray,
+                blob: np.ndarray, missing: np.ndarray) -> np.ndarray:
+        """(P,) per point of 2 views, of its ``missing`` (P,) views those where it is hidden
+        behind a sure point (>= 3 views): not its own, but the blob of a sure point at least
+        ``behind_m`` nearer that camera covers its projection (within the blob's radius plus
+        ``support_px``): the far knee of a standard pose seen from the side. Explained, not
+        missing; but a ghost may fall there too (two hands on a sword hilt), so only the
+        standard pose's naming counts it. proj (C, P, 2) px, depth (C, P) m: the points in each
+        view; n_views (P,); blob (C, P) each point's blob per view (-1: none)."""
+        out = np.zeros(len(n_views), np.int64)
         sure = n_views >= 3
-        if not sure.any() or sure.all():
+        if not sure.any() or not (~sure & (missing > 0)).any():  # most frames: nothing to explain
             return out
-        proj, depth = self.tri.project(X)  # (C, P, 2), (C, P)
         for c, v in enumerate(views):
             front = np.flatnonzero(sure & (blob[c] >= 0))
             if not front.size:
@@ -361,7 +362,7 @@ class PointReconstructor:
             hid = (d <= v.radius[b][None] + self.config.support_px) & \
                 (depth[c, front][None] < depth[c][:, None] - self.config.behind_m)
             out += (~sure & (blob[c] < 0) & hid.any(axis=1) & (depth[c] > 0.1)).astype(np.int64)
-        return out
+        return np.minimum(out, missing)
 
     def _to_ends(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
                  uv: np.ndarray, views: list[ViewBlobs]) -> tuple[set[tuple[int, int]], np.ndarray, list]:
