@@ -14,7 +14,10 @@ Per frame (:func:`reconstruct_points`):
 4. the candidates are accepted greedily, best first (more views, fewer *unexplained* views,
    smaller error; a 2-view candidate more than ``body_radius_m`` from the >= 3-view ones
    counts two more unexplained views): a blob is used at most once, a merged blob twice, and
-   two accepted points are never closer than ``min_separation_m``;
+   two accepted points are never closer than ``min_separation_m``; an accepted point seen by
+   >= 4 views with an error above ``rough_px`` may be a ghost made of two markers' blobs: the
+   acceptance is run again without it and that outcome taken when it explains as many blobs
+   with a clearly smaller error (:meth:`PointReconstructor._unghost`);
 5. a point seen only in merged blobs that each hold one other point (a marker hidden behind
    another wherever it is seen) lies at the two markers' midpoint: it is reflected through the
    other point (:meth:`PointReconstructor._mirror`);
@@ -65,6 +68,7 @@ class PointsConfig:
     body_radius_m: float = 1.5  #: 2-view points farther than this (horizontally) from the >= 3-view points' median rank lower
     part_px: float = 6.0  #: two single blobs this close in the one view that parts two otherwise merged markers
     ends_min_px: float = 1.0  #: a merged blob whose moments part its markers by less is used by its centroid
+    rough_px: float = 0.3  #: an accepted >= 4-view point this rough is checked for a ghost (``_unghost``)
     elongated_px: float = 2.0  #: a blob of a single marker's size whose moments part two markers by this much holds two
 
 
@@ -270,30 +274,10 @@ class PointReconstructor:
             far = (n_views < 3) & (np.linalg.norm(np.nan_to_num(X[:, :2]) - centre, axis=1) > cfg.body_radius_m)
         # greedy acceptance, best first
         order = np.lexsort((np.nan_to_num(err, nan=1e9), missing + 2 * far, -n_views))
-        capl = [v.capacity.tolist() for v in views]  # markers each blob may still give
-        rows, okl = blob.T.tolist(), ok.tolist()  # plain lists: this loop visits every candidate
-        keep: list[int] = []
-        for k in order.tolist():
-            if not okl[k]:
-                continue
-            row = rows[k]
-            cs = [c for c in range(C) if row[c] >= 0]
-            taken = [c for c in cs if capl[c][row[c]] <= 0]
-            if taken:
-                # a hidden marker projects onto the blob of the marker in front of it: the
-                # view is explained, but its blob is the other point's. Keep the point from
-                # its own views when >= 2 are left.
-                if len(cs) - len(taken) < 2 or not self._reduce(k, taken, X, err, n_views, blob, uv):
-                    continue
-                row = blob[:, k].tolist()
-                cs = [c for c in range(C) if row[c] >= 0]
-            if keep and np.min(np.linalg.norm(X[keep] - X[k], axis=1)) < cfg.min_separation_m:
-                continue
-            for c in cs:
-                capl[c][row[c]] -= 1
-            keep.append(k)
-            if len(keep) >= cfg.max_points:
-                break
+        fresh = (X.copy(), err.copy(), n_views.copy(), blob.copy())  # before acceptance reduces candidates
+        keep, capl = self._accept(order, views, ok, X, err, n_views, blob, uv)
+        keep, capl, X, err, n_views, blob = self._unghost(keep, capl, order, views, ok, (X, err, n_views, blob),
+                                                          fresh, uv, missing)
         cap = [np.array(c, np.int64) for c in capl]
         if not keep:
             return Points3D.empty(C)
@@ -644,6 +628,66 @@ class PointReconstructor:
             (X, err, n_views, missing, blob, uv, idx), np.stack([n[1] for n in new]), err[src], n_views[src],
             missing[src], blob_n, uv_n)
         return X, err, n_views, blob, uv, missing, idx, np.r_[parted, np.ones(len(new), bool)]
+
+    def _accept(self, order: np.ndarray, views: list[ViewBlobs], ok: np.ndarray, X: np.ndarray, err: np.ndarray,
+                n_views: np.ndarray, blob: np.ndarray, uv: np.ndarray) -> tuple[list[int], list[list[int]]]:
+        """Greedy acceptance of the candidates in ``order``: a blob is used at most as many times
+        as its capacity, two accepted points are never closer than ``min_separation_m``. Returns
+        the accepted candidates and the capacity left per view and blob; X, err, n_views and
+        blob of a candidate kept from its other views are updated in place."""
+        cfg, C = self.config, self.C
+        capl = [v.capacity.tolist() for v in views]  # markers each blob may still give
+        rows, okl = blob.T.tolist(), ok.tolist()  # plain lists: this loop visits every candidate
+        keep: list[int] = []
+        for k in order.tolist():
+            if not okl[k]:
+                continue
+            row = rows[k]
+            cs = [c for c in range(C) if row[c] >= 0]
+            taken = [c for c in cs if capl[c][row[c]] <= 0]
+            if taken:
+                # a hidden marker projects onto the blob of the marker in front of it: the
+                # view is explained, but its blob is the other point's. Keep the point from
+                # its own views when >= 2 are left.
+                if len(cs) - len(taken) < 2 or not self._reduce(k, taken, X, err, n_views, blob, uv):
+                    continue
+                row = blob[:, k].tolist()
+                cs = [c for c in range(C) if row[c] >= 0]
+            if keep and np.min(np.linalg.norm(X[keep] - X[k], axis=1)) < cfg.min_separation_m:
+                continue
+            for c in cs:
+                capl[c][row[c]] -= 1
+            keep.append(k)
+            if len(keep) >= cfg.max_points:
+                break
+        return keep, capl
+
+    def _unghost(self, keep: list[int], capl: list[list[int]], order: np.ndarray, views: list[ViewBlobs],
+                 ok: np.ndarray, accepted: tuple, fresh: tuple, uv: np.ndarray, missing: np.ndarray) -> tuple:
+        """Accepted points seen by >= 4 views with an error above ``rough_px`` may be ghosts: two
+        wrists, each hidden from one view and lined up in another, made a 4-view point between
+        them from one wrist's blobs in two views and the other's in two (0.9 px, against 0.1 for
+        the wrists), which the greedy order (more views first) took before the two 3-view
+        wrists. Without each such point the acceptance is run again (from the candidates as
+        they were before it, ``fresh``: X, err, n_views, blob); the other outcome is taken when
+        it uses as many blobs, leaves no more views unexplained and its points' errors sum at
+        least ``rough_px`` less. ``accepted``: X, err, n_views, blob after the first acceptance.
+        Returns keep, capl, X, err, n_views, blob."""
+        cfg = self.config
+        X, err, n_views, blob = accepted
+        for s in sorted((k for k in keep if n_views[k] >= 4 and err[k] > cfg.rough_px), key=lambda k: -err[k]):
+            if s not in keep:
+                continue
+            trial = tuple(a.copy() for a in fresh)
+            without = ok.copy()
+            without[s] = False
+            keep2, capl2 = self._accept(order, views, without, *trial, uv)
+            n2, e2 = trial[2], trial[1]
+            if n2[keep2].sum() >= n_views[keep].sum() and missing[keep2].sum() <= missing[keep].sum() \
+                    and e2[keep2].sum() <= err[keep].sum() - cfg.rough_px:
+                keep, capl, ok = keep2, capl2, without
+                X, err, n_views, blob = trial
+        return keep, capl, X, err, n_views, blob
 
     def _triangulate_views(self, uv: np.ndarray, k: int, cams: list[int]) -> TriangulationResult:
         """Candidate k triangulated from the views ``cams`` only (uv: (C, K, 2) px of the
