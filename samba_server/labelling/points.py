@@ -13,11 +13,12 @@ Per frame (:func:`reconstruct_points`):
    views (views off by more than the triangulator's ``max_error_px`` are dropped when >= 3);
 4. the candidates are accepted greedily, best first (more views, fewer *unexplained* views,
    smaller error; a 2-view candidate more than ``body_radius_m`` from the >= 3-view ones
-   counts two more unexplained views): a blob is used at most once, a merged blob twice, and
-   two accepted points are never closer than ``min_separation_m``; an accepted point seen by
-   >= 4 views with an error above ``rough_px`` may be a ghost made of two markers' blobs: the
-   acceptance is run again without it and that outcome taken when it explains as many blobs
-   with a clearly smaller error (:meth:`PointReconstructor._unghost`);
+   counts two more unexplained views): a blob is used at most once, a merged blob twice (a
+   candidate whose blob is taken is kept from its other views when >= 2 are left and ranked
+   again by them), and two accepted points are never closer than ``min_separation_m``; an
+   accepted point seen by >= 4 views with an error above ``rough_px`` may be a ghost made of
+   two markers' blobs: the acceptance is run again without it and that outcome taken when it
+   explains as many blobs with a clearly smaller error (:meth:`PointReconstructor._unghost`);
 5. a point seen only in merged blobs that each hold one other point (a marker hidden behind
    another wherever it is seen) lies at the two markers' midpoint: it is reflected through the
    other point (:meth:`PointReconstructor._mirror`);
@@ -37,6 +38,7 @@ near a millisecond.
 
 from __future__ import annotations
 
+import heapq
 import itertools
 from dataclasses import dataclass
 
@@ -273,10 +275,10 @@ class PointReconstructor:
             centre = np.median(np.repeat(X[sure, :2], counts[sure], axis=0), axis=0)
             far = (n_views < 3) & (np.linalg.norm(np.nan_to_num(X[:, :2]) - centre, axis=1) > cfg.body_radius_m)
         # greedy acceptance, best first
-        order = np.lexsort((np.nan_to_num(err, nan=1e9), missing + 2 * far, -n_views))
+        penalty = missing + 2 * far
         fresh = (X.copy(), err.copy(), n_views.copy(), blob.copy())  # before acceptance reduces candidates
-        keep, capl = self._accept(order, views, ok, X, err, n_views, blob, uv)
-        keep, capl, X, err, n_views, blob = self._unghost(keep, capl, order, views, ok, (X, err, n_views, blob),
+        keep, capl = self._accept(penalty, views, ok, X, err, n_views, blob, uv)
+        keep, capl, X, err, n_views, blob = self._unghost(keep, capl, penalty, views, ok, (X, err, n_views, blob),
                                                           fresh, uv, missing)
         cap = [np.array(c, np.int64) for c in capl]
         if not keep:
@@ -629,17 +631,27 @@ class PointReconstructor:
             missing[src], blob_n, uv_n)
         return X, err, n_views, blob, uv, missing, idx, np.r_[parted, np.ones(len(new), bool)]
 
-    def _accept(self, order: np.ndarray, views: list[ViewBlobs], ok: np.ndarray, X: np.ndarray, err: np.ndarray,
+    def _accept(self, penalty: np.ndarray, views: list[ViewBlobs], ok: np.ndarray, X: np.ndarray, err: np.ndarray,
                 n_views: np.ndarray, blob: np.ndarray, uv: np.ndarray) -> tuple[list[int], list[list[int]]]:
-        """Greedy acceptance of the candidates in ``order``: a blob is used at most as many times
-        as its capacity, two accepted points are never closer than ``min_separation_m``. Returns
-        the accepted candidates and the capacity left per view and blob; X, err, n_views and
-        blob of a candidate kept from its other views are updated in place."""
+        """Greedy acceptance of the candidates, best first (more views, then a smaller
+        ``penalty`` (K,): unexplained views, then a smaller error): a blob is used at most as
+        many times as its capacity, two accepted points are never closer than
+        ``min_separation_m``. A candidate some of whose blobs are taken is kept from its other
+        views when >= 2 are left, and ranked again by what is left of it (ranked by all its
+        views, a 3-view ghost of a knee's blob and the shoulders' merged blob, cut to 2 views,
+        went before the 3-view knee, whose one blob it then took). Returns the accepted
+        candidates and the capacity left per view and blob; X, err, n_views and blob of a
+        candidate kept from its other views are updated in place."""
         cfg, C = self.config, self.C
         capl = [v.capacity.tolist() for v in views]  # markers each blob may still give
         rows, okl = blob.T.tolist(), ok.tolist()  # plain lists: this loop visits every candidate
+        # best first: more views, then fewer unexplained (penalty), then smaller error
+        heap = [(-int(n), int(p), float(e), k) for k, (n, p, e) in
+                enumerate(zip(n_views.tolist(), penalty.tolist(), np.nan_to_num(err, nan=1e9).tolist()))]
+        heapq.heapify(heap)
         keep: list[int] = []
-        for k in order.tolist():
+        while heap:
+            k = heapq.heappop(heap)[3]
             if not okl[k]:
                 continue
             row = rows[k]
@@ -648,11 +660,12 @@ class PointReconstructor:
             if taken:
                 # a hidden marker projects onto the blob of the marker in front of it: the
                 # view is explained, but its blob is the other point's. Keep the point from
-                # its own views when >= 2 are left.
+                # its own views when >= 2 are left, ranked again by what is left of it.
                 if len(cs) - len(taken) < 2 or not self._reduce(k, taken, X, err, n_views, blob, uv):
                     continue
-                row = blob[:, k].tolist()
-                cs = [c for c in range(C) if row[c] >= 0]
+                rows[k] = blob[:, k].tolist()
+                heapq.heappush(heap, (-int(n_views[k]), int(penalty[k]), float(err[k]), k))
+                continue
             if keep and np.min(np.linalg.norm(X[keep] - X[k], axis=1)) < cfg.min_separation_m:
                 continue
             for c in cs:
@@ -662,7 +675,7 @@ class PointReconstructor:
                 break
         return keep, capl
 
-    def _unghost(self, keep: list[int], capl: list[list[int]], order: np.ndarray, views: list[ViewBlobs],
+    def _unghost(self, keep: list[int], capl: list[list[int]], penalty: np.ndarray, views: list[ViewBlobs],
                  ok: np.ndarray, accepted: tuple, fresh: tuple, uv: np.ndarray, missing: np.ndarray) -> tuple:
         """Accepted points seen by >= 4 views with an error above ``rough_px`` may be ghosts: two
         wrists, each hidden from one view and lined up in another, made a 4-view point between
@@ -681,7 +694,7 @@ class PointReconstructor:
             trial = tuple(a.copy() for a in fresh)
             without = ok.copy()
             without[s] = False
-            keep2, capl2 = self._accept(order, views, without, *trial, uv)
+            keep2, capl2 = self._accept(penalty, views, without, *trial, uv)
             n2, e2 = trial[2], trial[1]
             if n2[keep2].sum() >= n_views[keep].sum() and missing[keep2].sum() <= missing[keep].sum() \
                     and e2[keep2].sum() <= err[keep].sum() - cfg.rough_px:
