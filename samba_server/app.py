@@ -293,8 +293,10 @@ def zenoh_endpoints(args) -> tuple[list[str], list[str], dict | None]:
 
 
 def run_live(server: Server, args, extra_stop: threading.Event | None = None, on_tick=None,
-             before_close=None) -> int:
-    """Run ``server`` on Zenoh until Ctrl-C, SIGTERM or ``args.duration``; export/close at the end."""
+             before_close=None, summary: bool = True) -> int:
+    """Run ``server`` on Zenoh until Ctrl-C, SIGTERM or ``args.duration``; export/close at the end.
+    ``summary``: print frames / solved / solves skipped at the end and exit 3 (with a warning saying
+    why) when fewer than half the frames were solved (``samba-demo`` prints its own line)."""
     from .live import LiveServer
 
     stop = extra_stop or threading.Event()
@@ -352,5 +354,22 @@ def run_live(server: Server, args, extra_stop: threading.Event | None = None, on
         if getattr(args, "export", None):
             n = export_joints(server, args.export)
             print(f"\nwrote {n} frames to {args.export}", file=sys.stderr)
+        if summary:
+            code = code or _take_summary(server)
     return code
+
+
+def _take_summary(server: Server) -> int:
+    """At the end of a live session: frames, solved, solves skipped (stderr), and a warning with the
+    reason when fewer than half the frames were solved. Returns 3 then (as samba-process), else 0."""
+    st = server.stats
+    if not st.frames:
+        return 0
+    skipped = f", {st.solve_skipped} solves skipped (the server was behind)" if st.solve_skipped else ""
+    print(f"{st.frames} frames, {st.solved} solved{skipped}", file=sys.stderr)
+    if server.reconstructor is None or st.solved >= 0.5 * st.frames:
+        return 0
+    print(f"samba-server: WARNING: only {st.solved} of {st.frames} frames solved: {server.failure_reason()}",
+          file=sys.stderr)
+    return 3
 

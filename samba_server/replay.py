@@ -58,14 +58,15 @@ def skipped_solves(path: str | Path) -> set[int] | None:
     return seqs if first is not None else None
 
 
-def replay_into(server: Server, path: str | Path, progress: Callable[[int], None] | None = None) -> TakeReader:
+def replay_into(server: Server, path: str | Path, progress: Callable[[int], None] | None = None,
+                solve_all: bool = False) -> TakeReader:
     """Feed every recorded packet and event of ``path`` into ``server`` and flush it.
 
     The frames whose solve the live server skipped (it was behind, ``max_lag_ms``) are skipped
-    again, so the poses equal the live ones. Returns the reader (``.truncated`` tells whether
-    the take ended early).
+    again, so the poses equal the live ones; ``solve_all`` solves them too. Returns the reader
+    (``.truncated`` tells whether the take ended early).
     """
-    server.skip_seqs = skipped_solves(path) or set()
+    server.skip_seqs = set() if solve_all else (skipped_solves(path) or set())
     reader = TakeReader(path)
     for m in reader:
         mote = m.mote_id

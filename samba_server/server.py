@@ -381,6 +381,27 @@ class Server:
                 self._record_subject(recorder, now)
         return old
 
+    def failure_reason(self) -> str:
+        """Why most frames of a take have no pose (one sentence), from the counters: solves skipped
+        because the live server was behind, no frame, no 3D marker, never identified, or lost."""
+        st = self.labeller.stats
+        skipped = self.stats.solve_skipped
+        if skipped and skipped >= 0.5 * max(self.stats.frames, 1):
+            return (f"the server fell behind the motes and skipped the solve of {skipped} frames (older than "
+                    f"max_lag_ms = {self.config.max_lag_ms:g} ms: a faster machine, fewer motes or a lower fps); "
+                    "the recording holds every packet: samba-replay TAKE --out joints.npz --solve-all solves them")
+        if st.frames == 0:
+            return "no frame was assembled (are the videos empty or unreadable, did any mote send?)"
+        seen = st.frames_with_points / st.frames
+        if seen < 0.5:
+            return (f"markers were seen by two cameras in only {100 * seen:.0f} % of frames (check the calibration, "
+                    "that the cameras overlap, and the blobs with samba-mote --preview)")
+        if st.first_identified_t is None:
+            return ("the markers were never identified: no standard pose found and no frame showed enough of the body "
+                    "(start the take with the standard pose, facing +Y, in view of every camera)")
+        return (f"markers identified at {st.first_identified_t:.2f} s but lost for most of the take "
+                f"({st.identifications} identifications; look at samba-inspect --plot)")
+
     def report(self) -> dict:
         """What the server saw, for operators and the fault-harness tests (docs/reliability.md).
 

@@ -771,7 +771,7 @@ def test_live_capture_session(take: Path) -> None:
             assert m.returncode == 0, f"{m.args} exited {m.returncode}:\n{out}"
             outs.append(out)
         time.sleep(1.0)
-        assert stop(srv, log) == 0, log.read_text()
+        rc = stop(srv, log)
     finally:
         for p in procs:
             if p.poll() is None:
@@ -782,8 +782,21 @@ def test_live_capture_session(take: Path) -> None:
         assert f"{frames} frames" in out and "source ended" in out, out
     live = load_npz(d / "joints.npz")
     n_live, n_solved = len(live["t"]), int(solved(live["joints"]).sum())
-    print(f"live server: {n_live} poses from {frames} video frames, {n_solved} solved")
-    assert n_live >= 0.95 * frames and n_solved >= 0.5 * n_live, log.read_text()
+    text = log.read_text()
+    summary = re.search(r"(\d+) frames, (\d+) solved(?:, (\d+) solves skipped)?", text)
+    assert summary, text
+    skipped = int(summary.group(3) or 0)
+    print(f"live server: {n_live} poses from {frames} video frames, {n_solved} solved, {skipped} solves skipped")
+    assert n_live >= 0.95 * frames and (int(summary.group(1)), int(summary.group(2))) == (n_live, n_solved), text
+    # a 2-core machine running 4 motes beside the server may fall behind: the server then skips solves
+    # (max_lag_ms) and says so; the frames it had time for are solved
+    assert n_solved >= 0.5 * (n_live - skipped), text
+    if n_solved >= 0.5 * n_live:
+        assert rc == 0, text
+    else:  # a take mostly without poses says so, with the reason and the way out, and exits 3
+        assert rc == 3 and "WARNING: only" in text and "--solve-all" in text, text
+        run(sub(readme_command("samba-replay take.mcap --out"), "joints.npz", "all.npz") + " --solve-all", d)
+        assert solved(load_npz(d / "all.npz")["joints"]).sum() >= 0.5 * n_live
 
     # step 4: inspect the live take; replay it in-process: exactly the live poses
     r = run(readme_command("samba-inspect take.mcap --plot"), d)

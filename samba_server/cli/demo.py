@@ -137,7 +137,7 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"samba-demo: {args.motes} simulated motes -> server; Ctrl-C to stop", file=sys.stderr)
     try:
-        code = run_live(server, run_args, on_tick=on_tick, before_close=sim.stop)
+        code = run_live(server, run_args, on_tick=on_tick, before_close=sim.stop, summary=False)
     finally:
         sim.stop()
         tmp.cleanup()

@@ -101,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
     for line in activity.warnings() + unnamed_warnings(extra["markers"], joints):
         print(f"samba-process: WARNING: {line}", file=sys.stderr)
     if solved < 0.5 * len(t):
-        print(f"samba-process: WARNING: only {solved} of {len(t)} frames solved: {failure_reason(server)}",
+        print(f"samba-process: WARNING: only {solved} of {len(t)} frames solved: {server.failure_reason()}",
               file=sys.stderr)
         return 3
     return 0
@@ -128,22 +128,6 @@ def unnamed_warnings(markers: np.ndarray, joints: np.ndarray, share: float = UNN
         out.append(f"{side} {part} unnamed in {k} of {n} frames with a pose ({100 * k / n:.0f} %): the {side} "
                    f"{limb} there is the solver's guess (n_markers in the output counts the named markers)")
     return out
-
-
-def failure_reason(server) -> str:
-    """Why a take mostly failed, from the labelling stage's counters (one sentence)."""
-    st = server.labeller.stats
-    if st.frames == 0:
-        return "no frame was assembled from the videos (are they empty or unreadable?)"
-    seen = st.frames_with_points / st.frames
-    if seen < 0.5:
-        return (f"markers were seen by two cameras in only {100 * seen:.0f} % of frames (check the calibration, "
-                "that the cameras overlap, and the blobs with samba-mote --preview)")
-    if st.first_identified_t is None:
-        return ("the markers were never identified: no standard pose found and no frame showed enough of the body "
-                "(start the take with the standard pose, facing +Y, in view of every camera)")
-    return (f"markers identified at {st.first_identified_t:.2f} s but lost for most of the take "
-            f"({st.identifications} identifications; look at samba-inspect --plot)")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -29,6 +29,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", metavar="JOINTS.npz",
                     help="instead of publishing, re-run the take through the server pipeline in-process "
                          "(exactly the live poses) and write joints.npz")
+    ap.add_argument("--solve-all", action="store_true",
+                    help="with --out: also solve the frames whose solve the live server skipped because it was "
+                         "behind (the poses then differ from the live ones there)")
     ap.add_argument("--calibration", help="calibration.toml (default: the one recorded in the take)")
     ap.add_argument("--db", help="motion database for --out (default: the shipped one)")
     ap.add_argument("--config", help="server TOML for --out")
@@ -60,9 +63,12 @@ def main(argv: list[str] | None = None) -> int:
             server.packet_listeners.append(activity)
             n = sum(1 for _ in TakeReader(args.take))
             with Progress(n, "samba-replay") as bar:
-                reader = replay_into(server, args.take, bar.update)
+                reader = replay_into(server, args.take, bar.update, solve_all=args.solve_all)
             frames = export_joints(server, args.out)
             note = " (take truncated: read up to its last complete record)" if reader.truncated else ""
+            skipped = server.stats.solve_skipped
+            if skipped:
+                note += f"; {skipped} solves skipped, as live (the server was behind): --solve-all solves them"
             print(f"wrote {args.out}: {frames} frames, {server.stats.solved} solved{note}", file=sys.stderr)
             for line in activity.notes():
                 log.info(line)

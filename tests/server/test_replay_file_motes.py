@@ -86,7 +86,9 @@ def test_file_motes_live_replay_and_max_speed(tmp_path, file_take) -> None:
     assert stats[0].seconds >= 0.8 * stats[0].frames / 60.0
     live = server.poses
     assert len(live) >= 0.95 * stats[0].frames
-    assert sum(p.solved for p in live) >= 0.5 * len(live)
+    # a loaded 2-core machine may fall behind the motes: the server then skips solves (max_lag_ms),
+    # flags and counts them; the frames it had time for are solved
+    assert sum(p.solved for p in live) >= 0.5 * (len(live) - server.stats.solve_skipped)
 
     # samba-replay --out: exactly the live poses (frames whose solve live skipped are skipped again)
     rep = _replay_server(take_path, configs)
@@ -102,22 +104,43 @@ def test_file_motes_live_replay_and_max_speed(tmp_path, file_take) -> None:
     assert sent == sum(s.packets_sent for s in stats)
     assert server.skip_seqs is None and server2.skip_seqs is not None  # live motes vs a replay (see below)
     ref = _replay_server(take_path, configs)
-    import samba_server.replay as replay_mod
-
-    ref.skip_seqs = set()
-    for m in replay_mod.TakeReader(take_path):  # replay_into without the recorded skips
-        if m.mote_id is not None:
-            ref.ingest(m.mote_id, m.data, arrival_ns=m.log_time)
-        elif m.topic == replay_mod.EVENTS_TOPIC:
-            import json
-
-            ev = json.loads(m.data)
-            if ev["event"] in ("join", "leave"):
-                ref.mote_event(ev["mote_id"], ev["event"] == "join", ev["t_ns"])
-        ref.process_pending()
-    ref.finish()
+    replay_into(ref, take_path, solve_all=True)  # samba-replay --out --solve-all: without the recorded skips
     _same(ref.poses, server2.poses)
     assert sum(p.solved for p in server2.poses) >= sum(p.solved for p in live)
+
+
+def test_a_live_server_too_slow_to_solve_says_so_and_the_recording_solves_all(tmp_path, file_take, capsys) -> None:
+    """A live server behind its motes skips solves (max_lag_ms, here so small that every frame is
+    late): at the end it says how many, warns with the reason and the way out, and exits 3;
+    ``samba-replay --out`` gives the live poses (none solved), ``--solve-all`` solves them."""
+    from dataclasses import replace
+
+    from samba_common.formats import load_joints
+    from samba_server.app import _take_summary
+    from samba_server.cli.replay import main as replay_main
+
+    configs = load_server_configs()
+    configs = replace(configs, server=replace(configs.server, max_lag_ms=1e-6))
+    take_path, endpoint = tmp_path / "take.mcap", free_endpoint()
+    server = build_server(file_take.out_dir / "calibration.toml", configs, record=str(take_path))
+    with LiveServer(server, session="slow", listen=[endpoint]):
+        _run_motes(file_take, endpoint, "slow")
+        time.sleep(0.5)
+    server.recorder.close()
+    n = server.stats.frames
+    assert n > 30 and server.stats.solve_skipped == n and server.stats.solved == 0
+    capsys.readouterr()
+    assert _take_summary(server) == 3
+    err = capsys.readouterr().err
+    assert f"{n} frames, 0 solved, {n} solves skipped" in err
+    assert "WARNING: only 0 of" in err and "fell behind" in err and "--solve-all" in err
+
+    assert replay_main([str(take_path), "--out", str(tmp_path / "live.npz")]) == 0
+    assert "--solve-all solves them" in capsys.readouterr().err
+    assert not np.isfinite(load_joints(tmp_path / "live.npz").joints).all(axis=(1, 2)).any()
+    assert replay_main([str(take_path), "--out", str(tmp_path / "all.npz"), "--solve-all"]) == 0
+    joints = load_joints(tmp_path / "all.npz").joints
+    assert len(joints) == n and np.isfinite(joints).all(axis=(1, 2)).sum() >= 0.5 * n
 
 
 @pytest.mark.parametrize("replaying", [False, True])
