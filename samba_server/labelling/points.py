@@ -644,16 +644,15 @@ class PointReconstructor:
         candidate kept from its other views are updated in place."""
         cfg, C = self.config, self.C
         capl = [v.capacity.tolist() for v in views]  # markers each blob may still give
-        rows, okl = blob.T.tolist(), ok.tolist()  # plain lists: this loop visits every candidate
+        rows = blob.T.tolist()  # plain lists: this loop visits every candidate
         # best first: more views, then fewer unexplained (penalty), then smaller error
-        heap = [(-int(n), int(p), float(e), k) for k, (n, p, e) in
-                enumerate(zip(n_views.tolist(), penalty.tolist(), np.nan_to_num(err, nan=1e9).tolist()))]
+        idx = np.flatnonzero(ok)
+        heap = [(-n, p, e, k) for n, p, e, k in zip(n_views[idx].tolist(), penalty[idx].tolist(),
+                                                    np.nan_to_num(err[idx], nan=1e9).tolist(), idx.tolist())]
         heapq.heapify(heap)
         keep: list[int] = []
         while heap:
             k = heapq.heappop(heap)[3]
-            if not okl[k]:
-                continue
             row = rows[k]
             cs = [c for c in range(C) if row[c] >= 0]
             taken = [c for c in cs if capl[c][row[c]] <= 0]
