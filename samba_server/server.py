@@ -387,9 +387,12 @@ class Server:
         st = self.labeller.stats
         skipped = self.stats.solve_skipped
         if skipped and skipped >= 0.5 * max(self.stats.frames, 1):
+            then = (f"the recording holds every packet: samba-replay {self.recorder.path} --out joints.npz "
+                    "--solve-all solves them" if self.recorder is not None else
+                    "record the take (--record) to solve them afterwards with samba-replay --out --solve-all")
             return (f"the server fell behind the motes and skipped the solve of {skipped} frames (older than "
                     f"max_lag_ms = {self.config.max_lag_ms:g} ms: a faster machine, fewer motes or a lower fps); "
-                    "the recording holds every packet: samba-replay TAKE --out joints.npz --solve-all solves them")
+                    + then)
         if st.frames == 0:
             return "no frame was assembled (are the videos empty or unreadable, did any mote send?)"
         seen = st.frames_with_points / st.frames
