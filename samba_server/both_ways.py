@@ -56,6 +56,13 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   and the shoulder goes unnamed; a shoulder is seldom hidden from every view for long, a hand
   often is (a dribble on another body: a left wrist on the right shoulder's point for 0.5 s).
 
+- where the forward pass names a marker on a point the backward pass names as another marker,
+  which the forward pass leaves unnamed, the forward pass named it again from a stale prediction
+  after a gap (it was unnamed the frame before) and the backward pass came into those frames
+  tracking the other marker (it names it the frame after), the backward names of both stand:
+  one pass guessed, the other tracked (the high rig's climb: both shoulders hidden for 20
+  frames, then the right one named left by the forward pass for 1.2 s).
+
 Otherwise a naming that neither pass corrected is not overruled by the other: the backward
 pass starts mid-motion at the end of the take, with no standard pose, and its first
 identification is often the weaker one (tried: preferring the pass that had tracked longer
@@ -276,6 +283,26 @@ def _refuted(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike: np.ndar
     return out
 
 
+def _picked_up(fwd: np.ndarray, bwd: np.ndarray) -> list[tuple[int, int, int, int]]:
+    """(a, b, k0, k1): the runs of frames k0..k1 where the forward names fwd (F, 8, 3) put marker a
+    within 1 cm of the backward names bwd's (F, 8, 3) marker b and leave b unnamed, when the
+    forward pass had a unnamed in the frame before the run (it named a again from a stale
+    prediction after a gap) and the backward pass names b in the frame after it (it came into
+    the run tracking b). Runs at either end of the take are left out."""
+    nf, nb = np.isfinite(fwd).all(axis=2), np.isfinite(bwd).all(axis=2)
+    F, out = len(fwd), []
+    for a in range(N_MARKERS):
+        for b in range(N_MARKERS):
+            if a == b:
+                continue
+            frames = np.flatnonzero(nf[:, a] & ~nf[:, b] & _within(fwd[:, a], bwd[:, b]))
+            for run in np.split(frames, np.flatnonzero(np.diff(frames) > 1) + 1) if frames.size else []:
+                k0, k1 = int(run[0]), int(run[-1])
+                if 0 < k0 and k1 < F - 1 and not nf[k0 - 1, a] and nb[k1 + 1, b]:
+                    out.append((a, b, k0, k1))
+    return out
+
+
 def _within(a: np.ndarray, b: np.ndarray, tol: float = 0.01) -> np.ndarray:
     """(...) bool: points a (..., 3) and b (..., 3) (broadcast; NaN = unnamed), both named,
     within tol (m) of each other."""
@@ -321,7 +348,9 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     ``CLEAR_M``) and name as many markers, or at least 4; the backward names from a forward
     rename on that both passes refute (:func:`_refuted`); a shoulder the forward pass left
     unnamed where it names a wrist on that shoulder's backward point (:func:`_wrist_on_shoulder`;
-    the wrist unnamed there), also where a mix left it unnamed. A forward name kept on a point
+    the wrist unnamed there), also where a mix left it unnamed; the backward names of a and b
+    where the forward pass names a, picked up after a gap, on the point the backward pass
+    tracks as b (:func:`_picked_up`). A forward name kept on a point
     whose backward name is taken for another marker, and that backward name, are dropped
     (:func:`_disputed`); a frame whose mixed names would still name one point twice more
     often than the forward names keeps the forward ones. Returns ((F, 8, 3) markers, (F,)
@@ -378,6 +407,12 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         mixed[_disputed(mixed, take)] = np.nan
         if _doubles(mixed) <= _doubles(fwd.markers[k]):
             markers[k], from_b[k] = mixed, True
+    for a, b, k0, k1 in _picked_up(fwd.markers, bwd.markers):
+        for k in range(k0, k1 + 1):
+            mixed = markers[k].copy()
+            mixed[[a, b]] = bwd.markers[k, [a, b]]
+            if _doubles(mixed) <= _doubles(markers[k]):
+                markers[k], from_b[k] = mixed, True
     for w, s, hit in _wrist_on_shoulder(fwd.markers, bwd.markers):
         hit &= ~np.isfinite(markers[:, s]).all(axis=1)  # still unnamed (or disputed in a mix)
         markers[hit, s] = bwd.markers[hit, s]

@@ -334,6 +334,38 @@ def test_a_wrist_on_the_point_the_backward_pass_names_its_unnamed_shoulder_gives
     assert np.allclose(markers[:100], a[:100]) and np.allclose(markers[130:], a[130:])
 
 
+def test_a_name_picked_up_after_a_gap_gives_way_to_the_backward_track_of_that_point():
+    """The high rig's climb (001_14): the body hides both shoulders for 20 frames (140-159); when
+    the right one comes back, the forward pass names it the left shoulder (its prediction drifted)
+    and leaves the right one unnamed until frame 230, with no rename. The backward pass came
+    into that stretch tracking the right shoulder on the point. The forward name was picked up
+    from a stale prediction after a gap, the backward one tracked: the backward names stand.
+    Not when the forward pass had named the left shoulder in the frame before (it tracked it
+    too), nor when the backward pass picked the right shoulder up after a gap of its own."""
+    F = 300
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b[140:160, [LS, RS]] = np.nan  # both shoulders hidden
+    none = np.zeros(F, np.int64)
+    a = b.copy()
+    a[160:230, LS] = b[160:230, RS]
+    a[160:230, RS] = np.nan
+    markers, from_b = choose(PassResult(a, none, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
+    assert from_b[160:230].all() and np.allclose(markers[160:230], b[160:230])
+    assert np.allclose(markers[230:], a[230:]) and np.allclose(markers[:140], a[:140])
+
+    tracked = a.copy()
+    tracked[150:160, LS] = b[0, LS] - [0.0, 0.0, 0.3]  # the forward pass named it through the gap
+    markers, _b = choose(PassResult(tracked, none, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
+    # (the backward right shoulder fills the forward gap in it, so the point is disputed: neither name)
+    assert np.isnan(markers[160:230, LS]).all()
+    gap_b = b.copy()
+    gap_b[230:240, RS] = np.nan  # the backward pass came into the stretch without the right shoulder
+    markers, from_b = choose(PassResult(a, none, np.zeros(F)), PassResult(gap_b, none, np.zeros(F)), t)
+    assert not from_b[160:230].any() and np.allclose(markers[160:230], a[160:230], equal_nan=True)
+
+
 def test_a_coin_flip_settled_by_the_two_passes_agreeing_no_longer_gives_way():
     """The forward pass identifies the subject after a blackout with a margin of 0 but names it
     right: the two passes agree as a whole from frame 131 to 200. From frame 250 the backward
