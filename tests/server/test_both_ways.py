@@ -230,10 +230,12 @@ def test_a_forward_rename_both_passes_refute_is_undone_until_they_agree_again():
     swaps the two legs' names (as on a climb of another body), and the backward pass, tracking
     from the end of the take, names them as both did before. The forward pass's own past and
     the backward pass's future agree against that rule: the backward names are taken from the
-    rename until the forward pass names the legs as the backward one again (frame 80). A
-    backward pass that itself renamed the legs shortly before the rename, in its direction of
-    travel, refutes nothing; nor does one that named them otherwise before the rename, or alike
-    for less than AGREED_S (right after a blackout both passes can be wrong the same way)."""
+    rename until the forward pass names the legs as the backward one again (frame 80), also
+    where the backward pass renamed the legs shortly before, in its direction of travel, since
+    the forward pass names them as it does between (:func:`_doubted` with ``confirmed``). A
+    backward pass that named them otherwise before the rename refutes nothing, nor one that
+    named them alike for less than AGREED_S (right after a blackout both passes can be wrong
+    the same way)."""
     F = 120
     t = np.arange(F) / FPS
     b = np.zeros((F, 8, 3))
@@ -247,9 +249,9 @@ def test_a_forward_rename_both_passes_refute_is_undone_until_they_agree_again():
     markers, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(50, 80)) and np.allclose(markers, b)
     ren_b = np.zeros(F, np.int64)
-    ren_b[40] = ren_f[50]  # the backward pass doubted its own names there
+    ren_b[40] = ren_f[50]  # the backward pass renamed the legs at 40, but the forward pass confirms
     _m, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, ren_b, np.zeros(F)), t)
-    assert not from_b.any()
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(50, 80))  # its names from 41 on: no doubt
     other = b.copy()
     other[:50, legs] += 0.3  # the passes did not name the legs alike before the rename
     _m, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(other, none, np.zeros(F)), t)
@@ -309,6 +311,30 @@ def test_a_confirmed_rename_doubts_the_names_back_to_where_the_passes_last_agree
     ren_f[170], ren_f[350] = 0, 1 << LW
     _m, from_b = choose(PassResult(long, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(350 - int(APART_S * FPS), 350))
+
+
+def test_a_backward_rename_doubts_its_names_only_up_to_where_the_forward_pass_confirmed_them():
+    """The backward pass (walking back in time) named the left wrist wrong from frame 130 to
+    101 and renamed it at 100; from 131 on the forward pass names it at the same point: there
+    the backward name is confirmed, so the rename says nothing about the frames after 130.
+    The forward pass names the left wrist wrong from 140 and finds that out at 170: the whole
+    stretch 140-169 takes the backward name (it used to keep the wrong forward name up to
+    frame 160, one second after the backward rename), while 101-130 stay forward."""
+    F = 301
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    a = b.copy()
+    b[101:131, LW] += [0.0, 0.0, 0.5]  # backward wrong there, renamed at 100
+    a[140:170, LW] += [0.0, 0.0, 0.3]  # forward wrong there, renamed at 170
+    ren_f, ren_b = np.zeros(F, np.int64), np.zeros(F, np.int64)
+    ren_f[170], ren_b[100] = 1 << LW, 1 << LW
+    markers, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, ren_b, np.zeros(F)), t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 170))
+    assert np.allclose(markers[140:170], b[140:170]) and np.allclose(markers[101:131], a[101:131])
+    b[131:140, LW] += [0.0, 0.0, 0.5]  # never confirmed since the rename: doubted for its second
+    _m, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, ren_b, np.zeros(F)), t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(161, 170))
 
 
 def test_a_wrist_on_the_point_the_backward_pass_names_its_unnamed_shoulder_gives_it_back():
