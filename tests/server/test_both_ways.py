@@ -9,7 +9,8 @@ from samba_common.calib import default_rig
 from samba_common.skeleton import MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
-from samba_server.both_ways import AGREED_S, APART_S, NEXT_S, PassResult, choose, loose_of, relabel_both_ways
+from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, NEXT_S, PassResult, choose, loose_of,
+                                    relabel_both_ways)
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from samba_server.recon.reconstruct import Reconstructor
 from samba_server.server import Server, ServerConfig
@@ -335,6 +336,38 @@ def test_a_backward_rename_doubts_its_names_only_up_to_where_the_forward_pass_co
     b[131:140, LW] += [0.0, 0.0, 0.5]  # never confirmed since the rename: doubted for its second
     _m, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, ren_b, np.zeros(F)), t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(161, 170))
+
+
+def test_a_short_slip_of_the_forward_name_gives_way_to_the_backward_one_that_keeps_the_course():
+    """The left knee moves 1 cm per frame; both passes name it alike except for a few frames
+    where the forward pass slips onto the right knee's point (or drops the name) while the
+    backward pass keeps following it. There the backward name, on the knee's course between the
+    agreed frames, is taken. Not for a stretch longer than COURSE_S, not a backward name farther
+    than COURSE_M from that course, and not onto a point another chosen name holds."""
+    F = 120
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b[:, LK, 1] = 0.01 * np.arange(F)  # the left knee walks
+    none = np.zeros(F, np.int64)
+
+    def chosen(a: np.ndarray, bwd: np.ndarray) -> np.ndarray:
+        return choose(PassResult(a, none, np.zeros(F)), PassResult(bwd, none, np.zeros(F)), t)[0]
+
+    a = b.copy()
+    a[50:56, LK] = b[50:56, RK] + [0.0, 0.0, 0.2]  # the forward pass slips near the right knee for 6 frames
+    a[60:63, LK] = np.nan  # and drops the name for 3
+    markers = chosen(a, b)
+    assert np.allclose(markers, b)
+    n = int(COURSE_S * FPS) + 2  # too long to tell by the course
+    a[70:70 + n, LK] = b[70:70 + n, RK] + [0.0, 0.0, 0.2]
+    assert np.allclose(chosen(a, b)[70:70 + n], a[70:70 + n])
+    far = b.copy()
+    far[50:56, LK] += [0.0, 0.0, COURSE_M + 0.05]  # the backward name off the course too
+    assert np.allclose(chosen(a, far)[50:56], a[50:56])
+    held = b.copy()
+    held[60:63, LK] = b[60:63, LA]  # on the point the chosen left ankle holds
+    assert np.isnan(chosen(a, held)[60:63, LK]).all()
 
 
 def test_a_wrist_on_the_point_the_backward_pass_names_its_unnamed_shoulder_gives_it_back():
