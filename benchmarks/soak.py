@@ -108,6 +108,7 @@ def run_soak(seconds: float, motes: int = 4, fps: float = 60.0, progress: bool =
     end = float(np.median(end_rows[:, 1])) if len(end_rows) else float("nan")
     return {"seconds": seconds, "motes": motes, "fps": fps, "ready": ready == "ready", "sent": out.strip(),
             "frames": report["frames"], "expected": int(seconds * fps), "solved": report["solved"],
+            "solve_skipped": server.stats.solve_skipped,
             "degraded": report["degraded"], "drops": report["drops"],
             "rss_start_mb": base, "rss_end_mb": end, "rss_max_mb": float(s[:, 1].max()) if len(s) else float("nan"),
             "growth_pct": 100.0 * (end - base) / base if base == base else float("nan"),
