@@ -356,8 +356,7 @@ def _on_course(markers: np.ndarray, bwd: np.ndarray, t: np.ndarray, max_s: float
                 course = (1.0 - w) * markers[a, m] + w * markers[b + 1, m]
                 d_b = float(np.linalg.norm(bwd[k, m] - course))
                 d_c = float(np.linalg.norm(out[k, m] - course)) if np.isfinite(out[k, m]).all() else np.inf
-                held = _within(np.delete(out[k], m, axis=0), bwd[k, m])
-                if d_b < d_c and d_b <= gate_m and not held.any():
+                if d_b < d_c and d_b <= gate_m and not _within(np.delete(out[k], m, axis=0), bwd[k, m]).any():
                     out[k, m], changed[k] = bwd[k, m], True
     return out, changed
 

@@ -9,7 +9,6 @@ The last test runs the real LiveServer with simulated motes over TLS and checks 
 
 from __future__ import annotations
 
-import os
 import stat
 import threading
 import time
@@ -20,7 +19,7 @@ import pytest
 from samba_common import keys
 from samba_common import zenoh_util as zk
 
-from .conftest import free_endpoint, short_take
+from .conftest import free_endpoint, overloaded, short_take
 
 zenoh = pytest.importorskip("zenoh")
 x509 = pytest.importorskip("cryptography.x509")
@@ -284,7 +283,7 @@ def test_live_server_solves_over_tls(keydirs):
     assert server.stats.packets >= 0.9 * 4 * len(joints)
     # on an overloaded machine late packets leave frames incomplete and unsolved (59-95 of 132
     # solved beside two benchmarks on 2 cores): the share is checked only while it is not
-    if os.getloadavg()[0] < (os.cpu_count() or 1):
+    if not overloaded():
         assert len(solved) >= 0.8 * len(joints), f"{len(solved)} solved of {len(joints)} frames over TLS"
     assert server.stats.bad_packets == 0 and server.stats.unknown_motes == 0
     assert np.isfinite(solved[-1].joints).all()
