@@ -91,7 +91,7 @@ equals it.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -155,8 +155,10 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
     subject = getattr(server, "subject", None)
     if rec is None or subject is None or not hasattr(rec, "again"):
         return None
+    # the take's end faces anywhere: the standard pose's +Y is no prior for its first identification
+    label_config = replace(server.labeller.config, first_facing_weight=0.0)
     twin = Server(server.rig, None, rec.again(subject), ServerConfig(max_lag_ms=0.0, keep_history=False),
-                  tri_config=server.triangulator.config, label_config=server.labeller.config)
+                  tri_config=server.triangulator.config, label_config=label_config)
     F = len(t)
     out = PassResult(np.full((F, N_MARKERS, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan),
                      np.full(F, np.nan), np.zeros((F, N_MARKERS), bool))
