@@ -9,8 +9,8 @@ from samba_common.calib import default_rig
 from samba_common.skeleton import MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
-from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, NEXT_S, PassResult, choose, loose_of,
-                                    relabel_both_ways)
+from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, NEXT_S, PassResult, backward_pass, choose,
+                                    loose_of, relabel_both_ways)
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from samba_server.recon.reconstruct import Reconstructor
 from samba_server.server import Server, ServerConfig
@@ -77,6 +77,25 @@ def test_a_mirror_naming_after_a_blackout_is_replaced_by_the_backward_one():
     assert np.isfinite(joints[out]).all()
     err = np.linalg.norm(joints[wrong][:, list(MARKER_JOINT)] - truth[wrong], axis=2)
     assert err.max() < 0.1  # the pose follows the backward names
+
+
+def test_the_backward_pass_names_a_take_that_ends_facing_away_from_where_it_began():
+    """The backward pass identifies the subject afresh at the take's last frame. The standard
+    pose faces +Y, but a take may end facing anywhere: a dancer who ended facing -Y was named
+    mirrored, all four pairs, for the whole of her last kick. Here the subject turns 180 degrees
+    over 1.7 s and stops facing -Y; the backward pass must name her as the forward pass does."""
+    rig = default_rig(4)
+    joints, t = synthetic_motion(1.67, FPS, turn_deg=180.0)
+    truth = joints[:, list(MARKER_JOINT)]
+    rng = np.random.default_rng(5)
+    packets = [_packets(rig, truth[k], float(t[k]), rng) for k in range(len(t))]
+    server = Server(rig, None, Reconstructor(lengths=DEFAULT_LENGTHS), ServerConfig(max_lag_ms=0.0))
+    for k in range(len(t)):
+        markers, _mask, _q = server.label_packets(packets[k], float(t[k]))
+        assert _right(server.solve_markers(markers, float(t[k]))[0][None], truth[k][None]).all()
+    bwd = backward_pass(server, packets, t)
+    assert bwd is not None
+    assert _right(bwd.markers, truth).all()
 
 
 def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
