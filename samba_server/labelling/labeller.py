@@ -110,6 +110,7 @@ class LabelConfig:
     audit_extend_margin: float = 0.5  #: an identification that only adds names to the tracked ones needs this much more
     audit_move_margin: float = 2.0  #: ... and one that moves >= 2 tracked names to other points, naming < 2 more, this much
     audit_shoulder_s: float = 0.05  #: tracked names lacking a shoulder are audited only once it has been unnamed this long (>= 3 cameras)
+    audit_shoulder_lost_s: float = 0.5  #: ... and this long, a clear identification naming both shoulders and as many markers replaces them
     facing_weight: float = 3.0  #: weight of the known facing when identifying ...
     facing_decay: float = 1.0  #: ... decaying with this time constant since it was known ...
     facing_turn_rate: float = 1.5  #: ... and free within this many rad/s since then (at most 90 degrees)
@@ -1089,7 +1090,8 @@ class Labeller:
         tracking as evidence (``audit_agree``), replaces the tracked names when it is clear
         (``min_margin`` over every rival) and scores ``audit_margin`` more than they do
         (``audit_extend_margin`` when it only adds names: a wrist whose track and skeleton lost
-        it), or names >= 2 more markers where the tracked names lack a shoulder.
+        it), or names >= 2 more markers where the tracked names lack a shoulder (as many, naming
+        both shoulders, when one has been unnamed ``audit_shoulder_lost_s``).
         tracked_out: (8, 3) the tracked names; assign: (8,) their points (-1 = unnamed). Returns
         (8, 3) markers and quality, or None."""
         cfg = self.config
@@ -1133,7 +1135,14 @@ class Labeller:
         need = cfg.audit_extend_margin if extends else \
             (cfg.audit_move_margin if (moved >= 2 and gained < 2) or complete else cfg.audit_margin)
         if tracked is None:
-            if np.count_nonzero(best.labels >= 0) < q.n_labelled + 2:
+            # tracked names lacking a shoulder for long give way to a clear identification
+            # naming both and as many markers: a dancer's leg kicked up to her shoulders was
+            # named a shoulder after a blackout, and the names stayed wrong for 5 s
+            # (>= 3 cameras, as the wait above: with two, not measured)
+            long_lost = len(self.rig) >= 3 and max(shoulder_lost, default=0.0) >= cfg.audit_shoulder_lost_s and \
+                bool((best.labels[[LS, RS]] >= 0).all())
+            n_best = int(np.count_nonzero(best.labels >= 0))
+            if n_best < q.n_labelled + 2 and not (long_lost and n_best >= q.n_labelled):
                 return None
         elif best.score - tracked < need:
             return None
