@@ -223,15 +223,17 @@ def test_a_wrist_that_took_a_shoulders_point_gives_it_back(unglue, wrist):
     W = LW if wrist == "left" else RW
     rig = default_rig(4)
     truth = _motion(3.0)
-    cfg = LabelConfig() if unglue else replace(LabelConfig(), glued_wrist_s=float("inf"))
+    # (without it, and without the audit that replaces names lacking a shoulder for 0.5 s)
+    cfg = LabelConfig() if unglue else replace(LabelConfig(), glued_wrist_s=float("inf"),
+                                               audit_shoulder_lost_s=float("inf"))
     lab = Labeller(rig, config=cfg)
     lab.set_lengths(DEFAULT_LENGTHS)
     rng = np.random.default_rng(8)
     named = []
     for i, m in enumerate(truth):
-        if i == 60:
+        if i == 60:  # the shoulder was named until the frame before
             lab._pos[W], lab._vel[W] = lab._pos[LS], lab._vel[LS]
-            lab._pos[LS], lab._seen[LS] = np.nan, -np.inf
+            lab._pos[LS], lab._seen[LS] = np.nan, (i - 1) / FPS
         got, _q = lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
         named.append(got)
     named = np.array(named)
@@ -1739,3 +1741,39 @@ def test_a_standard_pose_seen_from_the_side_names_both_legs_at_once(behind_m):
         assert named.all()
     else:
         assert named[:, [LS, RS, LW, RW]].all() and not named[:, [LK, RK, LA, RA]].any()
+
+
+@pytest.mark.parametrize("lost_s", [0.5, float("inf")])
+def test_tracked_names_lacking_a_shoulder_for_long_give_way_to_a_clear_identification(lost_s):
+    """A dancer's leg kicked up to her shoulders right after a blackout was identified as a
+    shoulder; the seven tracked names, all wrong but fitting the rigid lengths, lacked the
+    other shoulder, and the audit's fresh identification, right and clear, names no two more
+    markers: the names stayed wrong for 5 s. Here seven tracked names are scrambled the same
+    way (a shoulder on the other's point, wrists on knees and ankles) with the right shoulder
+    unnamed: after 0.2 s the audit waits; after 0.6 s (``audit_shoulder_lost_s``) it names all
+    eight right, and never does without the rule."""
+    from samba_server.labelling import LabelQuality
+
+    rig = default_rig(4)
+    truth = _motion(2.0)
+    lab = Labeller(rig, config=replace(LabelConfig(), audit_shoulder_lost_s=lost_s))
+    lab.set_lengths(DEFAULT_LENGTHS)
+    rng = np.random.default_rng(8)
+    k = 89
+    for i, m in enumerate(truth[:k + 1]):
+        lab.label(_packets(rig, m, i / FPS, rng), i / FPS)
+    t, pts = k / FPS, lab._pts
+    right = np.array([int(np.argmin(np.linalg.norm(pts.X - truth[k, j], axis=1))) for j in range(8)])
+    assert (np.linalg.norm(pts.X[right] - truth[k], axis=1) < 0.02).all()
+    scrambled = np.full(8, -1)
+    for named, true in [(LS, RS), (LW, LK), (LK, LW), (RW, RA), (RA, RW), (LA, RK), (RK, LA)]:
+        scrambled[named] = right[true]
+    tracked = np.full((8, 3), np.nan)
+    tracked[scrambled >= 0] = pts.X[scrambled[scrambled >= 0]]
+    for since in (0.2, 0.6):
+        lab._seen[RS], lab._t_audit = t - since, -np.inf
+        audited = lab._audit(pts, tracked.copy(), scrambled.copy(), LabelQuality(7, len(pts), 0.1, 0.0, "tracking"), t)
+        if since < 0.5 or not np.isfinite(lost_s):
+            assert audited is None
+        else:
+            assert audited is not None and _right(audited[0][None], truth[k][None]).all()
