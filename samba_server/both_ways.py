@@ -98,13 +98,14 @@ import numpy as np
 from samba_common.skeleton import N_MARKERS
 
 from .labelling import bit_markers, marker_bits
+from .labelling.labeller import facing_of
 from .labelling.rigid import LS, LW, RS, RW
 from .recon.reconstruct import solve_both_ways
 from .server import Server, ServerConfig
 
 log = logging.getLogger(__name__)
 
-__all__ = ["PassResult", "backward_pass", "choose", "loose_of", "relabel_both_ways"]
+__all__ = ["PassResult", "backward_pass", "choose", "end_facing", "loose_of", "relabel_both_ways"]
 
 #: m (LabelQuality.margin_m, 0.1 m per identification score unit): an identification whose
 #: best labelling beat the runner-up by less than this was a coin flip (after a blackout the
@@ -127,6 +128,9 @@ APART_S = 3.0
 COURSE_S = 1.0 / 3.0
 #: m: ... and the backward name taken only this near the course
 COURSE_M = 0.1
+#: s: the backward pass's first identification assumes the facing the forward pass named this
+#: near the take's end
+END_FACING_S = 0.5
 
 
 @dataclass
@@ -145,18 +149,41 @@ class PassResult:
     loose: np.ndarray | None = None
 
 
-def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=None) -> PassResult | None:
+def end_facing(fwd: PassResult, t: np.ndarray, within_s: float = END_FACING_S) -> np.ndarray | None:
+    """(2,) unit horizontal facing of the subject at the take's end as the forward pass named
+    it: its shoulders in the last frame within ``within_s`` of the end that names both, when
+    those names do not descend from a coin-flip identification (margin < ``COIN_M``; the
+    standard pose's is none). None otherwise (or without identification margins)."""
+    if fwd.identified is None or not np.isfinite(fwd.identified).any():
+        return None
+    ident = fwd.identified.copy()
+    ident[np.flatnonzero(np.isfinite(ident))[0]] = np.inf  # the standard pose's: no coin flip
+    named = np.isfinite(fwd.markers).all(axis=2)
+    lineage = _lineage(ident, named.any(axis=1), forward=True, renamed=fwd.renamed)
+    for k in range(len(t) - 1, -1, -1):
+        if float(t[-1] - t[k]) > within_s:
+            break
+        if named[k, [LS, RS]].all():
+            coin_flip = bool(lineage[k] < COIN_M)  # (NaN: the standard pose's lineage)
+            return None if coin_flip else facing_of(fwd.markers[k, LS], fwd.markers[k, RS])
+    return None
+
+
+def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=None,
+                  facing: np.ndarray | None = None) -> PassResult | None:
     """Label the frames again from the last to the first with a twin of ``server`` (same rig,
     labelling and triangulation configuration, solver built for the subject ``server``
     measured). packets: per frame (F) a list per rig camera of MarkerPacket or None; t: (F,)
-    s; progress: optional, updated once per frame. None when the forward pass measured no
-    subject (never identified)."""
+    s; progress: optional, updated once per frame; facing: (2,) the subject's facing at the
+    take's end (:func:`end_facing`) for the first identification, else the standard pose's.
+    None when the forward pass measured no subject (never identified)."""
     rec = server.reconstructor
     subject = getattr(server, "subject", None)
     if rec is None or subject is None or not hasattr(rec, "again"):
         return None
-    # the take's end faces anywhere: the standard pose's +Y is no prior for its first identification
-    label_config = replace(server.labeller.config, first_facing_weight=0.0)
+    label_config = replace(server.labeller.config, time_reversed=True)
+    if facing is not None:
+        label_config = replace(label_config, first_facing=(float(facing[0]), float(facing[1])))
     twin = Server(server.rig, None, rec.again(subject), ServerConfig(max_lag_ms=0.0, keep_history=False),
                   tri_config=server.triangulator.config, label_config=label_config)
     F = len(t)
@@ -504,7 +531,7 @@ def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: P
     forward pass's names; progress: optional, updated once per frame of the backward pass.
     Returns ((F, 13, 3) joints, extras as process_frames gives them, plus ``from_backward``
     (F,) bool), or None when there is no second pass (no subject measured, no solver)."""
-    bwd = backward_pass(server, packets, t, progress)
+    bwd = backward_pass(server, packets, t, progress, end_facing(fwd, t))
     if bwd is None:
         log.info("no subject measured: labelled forwards only")
         return None

@@ -114,7 +114,9 @@ class LabelConfig:
     facing_weight: float = 3.0  #: weight of the known facing when identifying ...
     facing_decay: float = 1.0  #: ... decaying with this time constant since it was known ...
     facing_turn_rate: float = 1.5  #: ... and free within this many rad/s since then (at most 90 degrees)
-    first_facing_weight: float = 1.0  #: before any labelling: the standard pose faces +Y
+    first_facing: tuple[float, float] = (0.0, 1.0)  #: before any labelling the subject faces this way (x, y): the standard pose's +Y ...
+    first_facing_weight: float = 1.0  #: ... with this weight
+    time_reversed: bool = False  #: the take is labelled backwards in time (samba-process's second pass): the body travels the other way
     part_s: float = 0.3  #: a knee and the other leg's ankle that shared a merged point this recently and now part ...
     part_gain_m: float = 0.03  #: ... swap points when the shins fit this much better (m, both summed; inf: never)
     rigid_abs_tol: float = 0.05  #: rigid distances may differ by this ...
@@ -512,7 +514,7 @@ class Labeller:
             assign[worst] = arow[worst] = -1
         if assign[LS] >= 0 and assign[RS] >= 0 and self._facing is not None:
             # the body turns at most ~2 turns/s: a facing far from the last one is a mislabel
-            f = _facing(out[LS], out[RS])
+            f = facing_of(out[LS], out[RS])
             limit = math.cos(min(math.pi, math.radians(cfg.turn_slack_deg) + cfg.max_turn_rate * (t - self._t_facing)))
             if f is not None and float(f @ self._facing) < limit:
                 out[[LS, RS]] = np.nan
@@ -1038,7 +1040,7 @@ class Labeller:
 
     def _hint(self, t: float) -> Hint:
         """What identification may assume at time t: the last facing (trusted less the longer
-        ago; the standard pose's +Y before any labelling) and the body's travel."""
+        ago; ``first_facing`` before any labelling) and the body's travel (in true time)."""
         cfg = self.config
         hint = Hint()
         if self._facing is not None:
@@ -1046,10 +1048,11 @@ class Labeller:
             hint.facing_weight = cfg.facing_weight * math.exp(-(t - self._t_facing) / cfg.facing_decay)
             hint.facing_slack = min(math.pi / 2, cfg.facing_turn_rate * (t - self._t_facing))
         elif self.stats.identifications == 0:
-            hint.facing, hint.facing_weight = np.array([0.0, 1.0]), cfg.first_facing_weight
+            hint.facing, hint.facing_weight = np.array(cfg.first_facing, float), cfg.first_facing_weight
         if len(self._centres) >= 2 and self._centres[-1][0] - self._centres[0][0] >= 0.2:
             (t0, c0), (t1, c1) = self._centres[0], self._centres[-1]
-            hint.velocity = (c1 - c0) / (t1 - t0)
+            # backwards in time a subject walking forwards walks backwards
+            hint.velocity = (c1 - c0) / (t1 - t0) * (-1.0 if cfg.time_reversed else 1.0)
         return hint
 
     def _crossed_before(self, t: float) -> tuple[bool, bool]:
@@ -1375,7 +1378,7 @@ class Labeller:
             self._pos[m] = out[m]
             self._seen[m] = t
         if named[LS] and named[RS]:
-            f = _facing(out[LS], out[RS])
+            f = facing_of(out[LS], out[RS])
             if f is not None:
                 self._facing, self._t_facing = f, t
 
@@ -1529,7 +1532,7 @@ def _two_in_one(pts: Points3D, p: int) -> bool:
                                        and pts.n_merged[p] >= pts.n_views[p] - 1)
 
 
-def _facing(left: np.ndarray, right: np.ndarray) -> np.ndarray | None:
+def facing_of(left: np.ndarray, right: np.ndarray) -> np.ndarray | None:
     """Horizontal unit facing of a body whose shoulders are at left, right (facing = up x right)."""
     r = right - left
     f = np.array([-r[1], r[0]])

@@ -10,7 +10,7 @@ from samba_common.skeleton import MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
 from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, NEXT_S, PassResult, backward_pass, choose,
-                                    loose_of, relabel_both_ways)
+                                    end_facing, loose_of, relabel_both_ways)
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from samba_server.recon.reconstruct import Reconstructor
 from samba_server.server import Server, ServerConfig
@@ -83,19 +83,32 @@ def test_the_backward_pass_names_a_take_that_ends_facing_away_from_where_it_bega
     """The backward pass identifies the subject afresh at the take's last frame. The standard
     pose faces +Y, but a take may end facing anywhere: a dancer who ended facing -Y was named
     mirrored, all four pairs, for the whole of her last kick. Here the subject turns 180 degrees
-    over 1.7 s and stops facing -Y; the backward pass must name her as the forward pass does."""
+    over 1.7 s and stops facing -Y; the backward pass, told the facing the forward pass named at
+    the end (from the standard pose's clear identification), names her right, and mirrored
+    when it assumes the standard pose's facing."""
     rig = default_rig(4)
     joints, t = synthetic_motion(1.67, FPS, turn_deg=180.0)
     truth = joints[:, list(MARKER_JOINT)]
     rng = np.random.default_rng(5)
     packets = [_packets(rig, truth[k], float(t[k]), rng) for k in range(len(t))]
     server = Server(rig, None, Reconstructor(lengths=DEFAULT_LENGTHS), ServerConfig(max_lag_ms=0.0))
-    for k in range(len(t)):
-        markers, _mask, _q = server.label_packets(packets[k], float(t[k]))
-        assert _right(server.solve_markers(markers, float(t[k]))[0][None], truth[k][None]).all()
-    bwd = backward_pass(server, packets, t)
-    assert bwd is not None
-    assert _right(bwd.markers, truth).all()
+    F = len(t)
+    fwd = PassResult(np.full((F, 8, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan), np.full(F, np.nan))
+    for k in range(F):
+        markers, _mask, q = server.label_packets(packets[k], float(t[k]))
+        fwd.markers[k] = server.solve_markers(markers, float(t[k]))[0]
+        fwd.renamed[k], fwd.margin[k] = q.renamed, q.margin_m
+        if q.mode == "identified":
+            fwd.identified[k] = q.margin_m
+    assert _right(fwd.markers, truth).all()
+    facing = end_facing(fwd, t)
+    assert facing is not None and facing[1] < -0.9
+    assert _right(backward_pass(server, packets, t, facing=facing).markers, truth).all()
+    assert not _right(backward_pass(server, packets, t).markers[-10:], truth[-10:]).any()
+    # names from a coin-flip identification (after a blackout) give no facing
+    fwd.identified[F // 2] = 0.0
+    fwd.renamed[F // 2] = 0xFF
+    assert end_facing(fwd, t) is None
 
 
 def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
