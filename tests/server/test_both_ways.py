@@ -105,11 +105,11 @@ def test_the_backward_pass_names_a_take_that_ends_facing_away_from_where_it_bega
     assert facing is not None and facing[1] < -0.9
     assert _right(backward_pass(server, packets, t, facing=facing).markers, truth).all()
     assert not _right(backward_pass(server, packets, t).markers[-10:], truth[-10:]).any()
-    # nor names whose shoulders a rule renamed in the last second
+    # no facing from names whose shoulders a rule renamed in the last second ...
     fwd.renamed[F - 30] = 1 << LS
     assert end_facing(fwd, t) is None
     fwd.renamed[F - 30] = 0
-    # nor names from a coin-flip identification (after a blackout)
+    # ... nor from names that descend from a coin-flip identification (after a blackout)
     fwd.identified[F // 2] = 0.0
     fwd.renamed[F // 2] = 0xFF
     assert end_facing(fwd, t) is None
