@@ -9,7 +9,8 @@ the frames with a wrong or missing name were in the second after a blackout).
 
 Offline the later frames are known too. The take is labelled a second time, backwards in time
 (the same :class:`~samba_server.server.Server` code on the packets in reverse order, with the
-subject the forward pass measured from its standard pose), so each frame has two namings:
+subject the forward pass measured from its standard pose, starting from the facing the forward
+pass named at the end: :func:`end_facing`), so each frame has two namings:
 one tracked from the past, one from the future. The forward (live) naming stays, except:
 
 - where the forward pass itself found a marker's name wrong within ``window_s`` (1 s) after
