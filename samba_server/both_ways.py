@@ -154,6 +154,18 @@ class PassResult:
     loose: np.ndarray | None = None
 
 
+def _standard_pose_clear(identified: np.ndarray | None) -> np.ndarray | None:
+    """A copy of a forward pass's identification margins (F,) (NaN elsewhere) with its first
+    one, the standard pose's, set to inf: never a coin flip. None stays None."""
+    if identified is None:
+        return None
+    out = identified.copy()
+    first = np.flatnonzero(np.isfinite(out))
+    if first.size:
+        out[first[0]] = np.inf
+    return out
+
+
 def end_facing(fwd: PassResult, t: np.ndarray, within_s: float = END_FACING_S) -> np.ndarray | None:
     """(2,) unit horizontal facing of the subject at the take's end as the forward pass named
     it: its shoulders in the last frame within ``within_s`` of the end that names both, when
@@ -166,10 +178,8 @@ def end_facing(fwd: PassResult, t: np.ndarray, within_s: float = END_FACING_S) -
         return None
     if bit_markers(fwd.renamed[t >= t[-1] - 1.0].astype(np.int64))[:, [LS, RS]].any():
         return None
-    ident = fwd.identified.copy()
-    ident[np.flatnonzero(np.isfinite(ident))[0]] = np.inf  # the standard pose's: no coin flip
     named = np.isfinite(fwd.markers).all(axis=2)
-    lineage = _lineage(ident, named.any(axis=1), forward=True, renamed=fwd.renamed)
+    lineage = _lineage(_standard_pose_clear(fwd.identified), named.any(axis=1), forward=True, renamed=fwd.renamed)
     for k in range(len(t) - 1, -1, -1):
         if float(t[-1] - t[k]) > within_s:
             break
@@ -473,9 +483,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     # renames: the passes agreeing before one are as often both wrong alike (module docstring)
     doubt_b = _doubted(bwd.renamed.astype(np.int64) & agree_b, nb.any(axis=1), t, window_s, forward=False,
                        confirmed=both)
-    ident_f = fwd.identified.copy() if fwd.identified is not None else None
-    if ident_f is not None and np.isfinite(ident_f).any():
-        ident_f[np.flatnonzero(np.isfinite(ident_f))[0]] = np.inf  # the standard pose's: no coin flip
+    ident_f = _standard_pose_clear(fwd.identified)
     # the two passes agreeing as a whole settle a coin flip: later frames do not descend from it
     settled = ((nf & nb).sum(axis=1) >= 4) & same.all(axis=1)
     lin_f = _lineage(ident_f, nf.any(axis=1), forward=True, settled=settled, renamed=fwd.renamed)
