@@ -136,6 +136,17 @@ COURSE_M = 0.1
 #: s: the backward pass's first identification assumes the facing the forward pass named this
 #: near the take's end
 END_FACING_S = 0.5
+#: m: a marker a pass leaves unnamed costs as much in its fit as a named one this far off ...
+FIT_UNNAMED_M = 0.01
+#: ... and a named one costs at most as much as one this far off (a pass's solve right after a
+#: rename, or of a marker on a merged point, can be off by more with the right names)
+FIT_CAP_M = 0.02
+#: a stretch where the two passes differ takes the backward names when they fit this many
+#: times better than the forward ones ...
+FIT_RATIO = 2.0
+#: ... and by this much (m^2, summed over the stretch's frames and markers: 0.003 is 30
+#: marker-frames left unnamed)
+FIT_GAIN_M2 = 0.003
 
 
 @dataclass
@@ -145,13 +156,16 @@ class PassResult:
     before, wrong and replaced it (``LabelQuality.renamed``); margin: (F,) label margin m;
     identified: (F,) the margin (m, ``LabelQuality.margin_m``) of the identification that
     named the frame, NaN on the frames tracking named (None: no identification known); loose:
-    (F, 8) bool, the named markers whose position is rough (:meth:`Labeller.loose`; None: none)."""
+    (F, 8) bool, the named markers whose position is rough (:meth:`Labeller.loose`; None: none);
+    residual: (F,) m, the pass's own solve of its names (rms marker fit; NaN unsolved; None:
+    not known)."""
 
     markers: np.ndarray
     renamed: np.ndarray
     margin: np.ndarray
     identified: np.ndarray | None = None
     loose: np.ndarray | None = None
+    residual: np.ndarray | None = None
 
 
 def _standard_pose_clear(identified: np.ndarray | None) -> np.ndarray | None:
@@ -208,12 +222,12 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
                   tri_config=server.triangulator.config, label_config=label_config)
     F = len(t)
     out = PassResult(np.full((F, N_MARKERS, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan),
-                     np.full(F, np.nan), np.zeros((F, N_MARKERS), bool))
+                     np.full(F, np.nan), np.zeros((F, N_MARKERS), bool), np.full(F, np.nan))
     t_end = float(t[-1]) if F else 0.0
     for k in range(F - 1, -1, -1):
         tb = t_end - float(t[k])  # backwards time runs forwards
         markers, _mask, q = twin.label_packets(packets[k], tb)
-        markers = twin.solve_markers(markers, tb)[0]
+        markers, _joints, out.residual[k], _bounds = twin.solve_markers(markers, tb)
         out.markers[k], out.margin[k], out.renamed[k] = markers, q.margin_m, q.renamed
         out.loose[k] = twin.labeller.loose(markers)
         if q.mode == "identified":
@@ -431,6 +445,35 @@ def _wrist_on_shoulder(fwd: np.ndarray, bwd: np.ndarray) -> list[tuple[int, int,
             for w in (LW, RW) for s in (LS, RS)]
 
 
+def _misfit(p: PassResult, a: int, b: int) -> float:
+    """How badly pass p's names fit its own solves over frames a..b-1 (m^2): per frame and
+    marker, a named one its frame's rms residual squared (at most ``FIT_CAP_M`` squared; a
+    frame its solver did not solve counts at the cap), an unnamed one ``FIT_UNNAMED_M``
+    squared."""
+    n = np.isfinite(p.markers[a:b]).all(axis=2).sum(axis=1)
+    r = np.minimum(np.nan_to_num(p.residual[a:b], nan=FIT_CAP_M), FIT_CAP_M)
+    return float((n * r**2 + (N_MARKERS - n) * FIT_UNNAMED_M**2).sum())
+
+
+def _fits_better(fwd: PassResult, bwd: PassResult) -> np.ndarray:
+    """(F,) bool: the frames of each stretch where the two passes name the markers differently
+    (some marker named by one pass only, or at points more than 1 cm apart) whose backward names
+    fit the solver by ``FIT_RATIO`` times and ``FIT_GAIN_M2`` better than the forward ones
+    (:func:`_misfit`): the reconstruction's fit as the judge of two namings no rule told
+    apart. False everywhere when a pass has no residuals."""
+    F = len(fwd.markers)
+    out = np.zeros(F, bool)
+    if fwd.residual is None or bwd.residual is None:
+        return out
+    named = np.isfinite(fwd.markers).all(axis=2).any(axis=1) | np.isfinite(bwd.markers).all(axis=2).any(axis=1)
+    differ = ~_within(fwd.markers, bwd.markers).all(axis=1) & named
+    edges = np.flatnonzero(np.diff(np.r_[0, differ.astype(np.int8), 0]))
+    for a, b in zip(edges[::2], edges[1::2]):
+        e_f, e_b = _misfit(fwd, a, b), _misfit(bwd, a, b)
+        out[a:b] = e_b * FIT_RATIO < e_f and e_f - e_b > FIT_GAIN_M2
+    return out
+
+
 def _doubles(markers: np.ndarray) -> int:
     """Pairs of named markers (8, 3) within 1 cm of each other: one point named twice."""
     return int(np.count_nonzero(np.triu(_on_one_point(markers), 1)))
@@ -526,7 +569,9 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         markers[hit & _within(markers[:, w], bwd.markers[:, s]), w] = np.nan
         from_b |= hit
     markers, course = _on_course(markers, bwd.markers, t)
-    return markers, from_b | course
+    fit = _fits_better(fwd, bwd)
+    markers[fit] = bwd.markers[fit]
+    return markers, from_b | course | fit
 
 
 def loose_of(markers: np.ndarray, fwd: PassResult, bwd: PassResult) -> np.ndarray | None:

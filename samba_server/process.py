@@ -163,7 +163,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
 
         kept += [[None] * len(server.rig.names) for _ in range(n_frames - len(kept))]
         again = relabel_both_ways(server, kept[:n_frames], t_live,
-                                  PassResult(markers, renamed, margin, identified, loose), progress)
+                                  PassResult(markers, renamed, margin, identified, loose, residual), progress)
         if again is not None:
             live = {"joints": joints, "markers": markers, "joint_bound": bound}
             joints, extra = again

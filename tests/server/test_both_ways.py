@@ -3,6 +3,8 @@ is the real labelling and solver run on the packets in reverse order."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from samba_common.calib import default_rig
@@ -12,7 +14,7 @@ from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
 from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, NEXT_S, PassResult, backward_pass, choose,
                                     end_facing, loose_of, relabel_both_ways)
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
-from samba_server.recon.reconstruct import Reconstructor
+from samba_server.recon.reconstruct import Reconstructor, solve_frames
 from samba_server.server import Server, ServerConfig
 
 FPS = 60.0
@@ -113,6 +115,33 @@ def test_the_backward_pass_names_a_take_that_ends_facing_away_from_where_it_bega
     fwd.identified[F // 2] = 0.0
     fwd.renamed[F // 2] = 0xFF
     assert end_facing(fwd, t) is None
+
+
+def test_a_naming_the_solver_cannot_fit_gives_way_to_the_backward_one_that_it_fits():
+    """For 0.5 s the forward pass names the right knee on the left knee's point and leaves the
+    left knee unnamed (knees passing each other in a dribble; no rule renamed anything, so no
+    two-way rule doubts it), while the backward pass names both knees right. Solved, the
+    forward names put the right knee where the subject's right shin cannot reach: the solver's
+    residual says which naming is a body. The backward names are taken there, and only there.
+    Where the forward naming fits as well (as knees swapped both ways may) it stays; without
+    residuals the other two-way rules leave those frames wrong."""
+    truth, packets, t, server, fwd = _take(blackout=(0, 0))
+    bwd = backward_pass(server, packets, t)
+    assert _right(bwd.markers[20:], truth[20:]).all()
+    wrong = np.arange(150, 180)
+    bad = PassResult(fwd.markers.copy(), fwd.renamed.copy(), fwd.margin.copy())
+    bad.markers[wrong, RK] = bad.markers[wrong, LK]
+    bad.markers[wrong, LK] = np.nan
+    rec = server.reconstructor.again(server.subject)
+    bad.residual = np.array([r.residual for r in solve_frames(rec, bad.markers, t, range(len(t)))])
+    assert np.nanmedian(bad.residual[wrong]) > 3 * np.nanmedian(bwd.residual[wrong])
+    markers, from_b = choose(bad, bwd, t)
+    assert _right(markers[wrong], truth[wrong]).all() and from_b[wrong].all()
+    assert np.array_equal(markers[:150], bad.markers[:150], equal_nan=True)
+    swapped = replace(bad, markers=fwd.markers.copy(), residual=bwd.residual)  # knees swapped, fitting as well
+    swapped.markers[np.ix_(wrong, [LK, RK])] = fwd.markers[np.ix_(wrong, [RK, LK])]
+    assert np.array_equal(choose(swapped, bwd, t)[0][wrong], swapped.markers[wrong])
+    assert not _right(choose(replace(bad, residual=None), bwd, t)[0][wrong], truth[wrong]).any()  # the rules alone
 
 
 def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
