@@ -255,13 +255,16 @@ class Reconstructor:
         log.info("live subject #%d %s", self.subject_version, describe(subject))
 
     def warm_up(self) -> None:
-        """Compile the solver now rather than on the first live frame (the very first run on a
-        machine compiles for about a minute; later runs load the compiled code from disk)."""
+        """Compile the solver and the labelling's database check (:meth:`body_distance`) now
+        rather than on the first live frames (the very first run on a machine compiles for about
+        a minute; later runs load the compiled code from disk; compiled on a live frame, the
+        database check stalled the first demo for 2-9 s)."""
         lengths = self.lengths if self.lengths is not None else self.db.mean_lengths
         probe = Reconstructor(self.db, self.config, lengths, self.offsets)
         markers = markers_from_joints(standard_pose(lengths)[None], self.offsets)[0]
         for i in range(3):
             probe.solve(markers, i / 30.0)
+        probe.body_distance(markers[None], 0.1)  # the labelling's check of names against the database
 
     def markers_of(self, joints: np.ndarray) -> np.ndarray:
         """Model markers (8, 3) (or (F, 8, 3)) of solved joints (13, 3) / (F, 13, 3): the joint
