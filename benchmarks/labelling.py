@@ -27,6 +27,7 @@ blackout, solved the same way: forwards and backwards merged, or forwards only w
     python benchmarks/labelling.py --start 8   # the clips' later parts, which the default never runs
     python benchmarks/labelling.py --body-scale 0.75   # child-sized bodies (1.25: very tall adults)
     python benchmarks/labelling.py --calibration benchmarks/rigs/high.toml   # another rig than samba-sim's
+    python benchmarks/labelling.py --seed 601 --cameras 4   # bodies no rule was traced on: the held-out figure
 """
 
 from __future__ import annotations
@@ -77,6 +78,8 @@ UNSEEN = ("002_02", "002_07", "005_11", "006_07", "006_04", "006_09", "005_10", 
 FRESH = ("005_04", "005_06", "005_09", "005_12", "005_13", "005_15", "005_17", "005_19", "005_20", "006_05")
 KINDS = {"tuned": TUNED, "checked": CHECKED, "unseen": UNSEEN, "fresh": FRESH}
 CLIPS = TUNED + CHECKED + UNSEEN + FRESH
+#: the seed the labelling was traced and tuned on (its figures are development figures)
+SEED = 3
 #: with --start, a clip with less motion than this left (s) is skipped: too short for a blackout mid-motion
 MIN_PART_S = 3.0
 
@@ -130,7 +133,9 @@ def main() -> int:
                          "children, 1.25 for very tall adults")
     ap.add_argument("--blackout", type=float, default=1.0, help="seconds of total blackout mid-motion (0 = none)")
     ap.add_argument("--codec", default="mjpg", choices=["ffv1", "mjpg", "h264"])
-    ap.add_argument("--seed", type=int, default=3)
+    ap.add_argument("--seed", type=int, default=SEED,
+                    help=f"bodies, noise and distractors (default {SEED}, the seed the labelling was developed on; "
+                         "another seed gives bodies no rule was traced on, recorded in a section of its own)")
     ap.add_argument("--one-pass", action="store_true",
                     help="label forwards only (samba-process --one-pass, as live); default: both ends, as samba-process")
     ap.add_argument("--calibration", type=Path, default=None,
@@ -255,6 +260,8 @@ def main() -> int:
             title += f", bodies x{size:g} (--body-scale {size:g})"
         if own_rig is not None:
             title += f", rig {args.calibration.stem} (--calibration)"
+        if args.seed != SEED:  # other bodies and noise: its own section, the development seed's stays
+            title += f", seed {args.seed} (--seed {args.seed})"
         record(title,
                [f"Held-out subjects (database without the clip's subject), "
                 f"{'bodies varied' if size is None else f'bodies x{size:g} the subject (bone types varied)'}, "

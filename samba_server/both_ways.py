@@ -81,6 +81,18 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   frames not all right; of six other sets of saved passes, two rigs and older labellers,
   five lost 11-23 frames each and one gained 1).
 
+- last, where the two passes name the markers differently over a stretch of frames and the
+  backward names fit the solver ``FIT_RATIO`` (2) times better than the forward ones, and by
+  ``FIT_GAIN_M2`` (:func:`_misfit`: each pass's own solve residuals, a marker left unnamed
+  counting as one ``FIT_UNNAMED_M`` off), the stretch takes the backward names: the
+  reconstruction's fit judges two namings no rule told apart (a dribbler's knee named on the
+  other knee's point for 2 s, 5-19 mm against 0.4-2.4 mm; a climber's shoulder and wrists
+  confused for 2 s). On saved passes of bodies no rule was traced on (4 cameras, the 49 clips
+  on seeds 501-503 with the blackout anywhere in the motion and on 501 with it mid-motion: 196
+  takes) frames not all right 2223 -> 1915; seeds 3 and 11, which the rules were traced on,
+  426 -> 435. Not the other way round (forward names fitting better replacing backward
+  names a rule took): 1915 -> 1867 frames not all right, but 1226 -> 1252 with a wrong name.
+
 Otherwise a naming that neither pass corrected is not overruled by the other: the backward
 pass starts mid-motion at the end of the take, with no standard pose, and its first
 identification is often the weaker one (tried: preferring the pass that had tracked longer
