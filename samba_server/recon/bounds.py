@@ -77,14 +77,28 @@ def joint_bounds(joints: np.ndarray, at_markers: np.ndarray, novelty: float, len
     if not np.isfinite(joints).all():
         return out
     nov = float(novelty) if np.isfinite(novelty) else 1.0
-    for i, j in enumerate(MARKER_JOINT):
-        out[j] = at_markers[i]
+    out[:] = 0.0
     for elbow, sh, wr in _ARMS:
         r = swivel_radius(joints[sh], joints[wr], float(lengths[_UPPER_ARM]), float(lengths[_FOREARM]))
-        out[elbow] = max(r * (ELBOW_SWIVEL + 0.5 * min(nov, NOVELTY_CAP)), out[sh], out[wr])
+        out[elbow] = r * (ELBOW_SWIVEL + 0.5 * min(nov, NOVELTY_CAP))
+    out[_HIPS] = HIP_BASE + HIP_NOVELTY * nov
+    out[_HEAD] = HEAD_BASE + HEAD_NOVELTY * nov
+    return widened(out, at_markers)
+
+
+def widened(bounds: np.ndarray, at_markers: np.ndarray) -> np.ndarray:
+    """Bounds (..., 13) m with each marker joint's raised to at least at_markers (..., 8) m and
+    the joints placed from it raised with it: an elbow to its shoulder's and wrist's, the hips
+    to the shoulders' and their knee's, the head to the shoulders'. A new array."""
+    out = np.array(bounds, float)
+    for i, j in enumerate(MARKER_JOINT):
+        out[..., j] = np.maximum(out[..., j], at_markers[..., i])
+    for elbow, sh, wr in _ARMS:
+        out[..., elbow] = np.maximum(out[..., elbow], np.maximum(out[..., sh], out[..., wr]))
+    shoulders = out[..., _SHOULDERS].max(axis=-1)
     for hip, knee in zip(_HIPS, _KNEES):
-        out[hip] = max(HIP_BASE + HIP_NOVELTY * nov, out[_SHOULDERS].max(), out[knee])
-    out[_HEAD] = max(HEAD_BASE + HEAD_NOVELTY * nov, out[_SHOULDERS].max())
+        out[..., hip] = np.maximum(out[..., hip], np.maximum(shoulders, out[..., knee]))
+    out[..., _HEAD] = np.maximum(out[..., _HEAD], shoulders)
     return out
 
 

@@ -9,7 +9,7 @@ import pytest
 from samba_common.body import prepend_standard_pose
 from samba_common.bvh import load_bvh, resample
 from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT
-from samba_server.recon.bounds import CONFIDENT_M, UNSEEN_SPEED, swivel_radius
+from samba_server.recon.bounds import CONFIDENT_M, UNSEEN_SPEED, swivel_radius, widened
 from samba_server.recon.db import load_default_db
 from samba_server.recon.evaluate import vary_body
 from samba_server.recon.reconstruct import reconstruct_take
@@ -23,6 +23,22 @@ def test_swivel_radius_is_zero_for_a_straight_arm_and_grows_as_it_bends():
     assert swivel_radius(s, np.array([0.7, 0, 0]), 0.3, 0.25) == 0.0  # over-stretched: no circle
     d = np.hypot(0.3, 0.25)  # a right angle at the elbow: radius = U F / D
     assert swivel_radius(s, np.array([d, 0, 0]), 0.3, 0.25) == pytest.approx(0.3 * 0.25 / d)
+
+
+def test_a_marker_joint_widened_carries_the_joints_placed_from_it_and_no_others():
+    """A doubt of 30 cm about the left knee raises the left knee and the left hip (placed from
+    it), not the right leg nor the arms; one about a shoulder raises the elbow below it, both
+    hips and the head; the bounds never shrink."""
+    b = np.full((2, len(JOINT_NAMES)), 0.03)
+    doubt = np.zeros((2, 8))
+    doubt[0, MARKER_JOINT.index(J["left_knee"])] = 0.3
+    doubt[1, MARKER_JOINT.index(J["right_shoulder"])] = 0.3
+    out = widened(b, doubt)
+    up = {n for n in JOINT_NAMES if out[0, J[n]] > 0.03}
+    assert up == {"left_knee", "left_hip"}
+    up = {n for n in JOINT_NAMES if out[1, J[n]] > 0.03}
+    assert up == {"right_shoulder", "right_elbow", "left_hip", "right_hip", "head"}
+    assert np.array_equal(widened(out, np.zeros((2, 8))), out) and np.array_equal(b, np.full_like(b, 0.03))
 
 
 def _take(cmu_dir, clip: str, seconds: float, seed: int):

@@ -8,12 +8,13 @@ from dataclasses import replace
 import numpy as np
 
 from samba_common.calib import default_rig
-from samba_common.skeleton import MARKER_JOINT
+from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
 from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, NEXT_S, PassResult, backward_pass, choose,
                                     end_facing, loose_of, relabel_both_ways)
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
+from samba_server.recon.bounds import CONFIDENT_M
 from samba_server.recon.reconstruct import Reconstructor, solve_frames
 from samba_server.server import Server, ServerConfig
 
@@ -142,6 +143,24 @@ def test_a_naming_the_solver_cannot_fit_gives_way_to_the_backward_one_that_it_fi
     swapped.markers[np.ix_(wrong, [LK, RK])] = fwd.markers[np.ix_(wrong, [RK, LK])]
     assert np.array_equal(choose(swapped, bwd, t)[0][wrong], swapped.markers[wrong])
     assert not _right(choose(replace(bad, residual=None), bwd, t)[0][wrong], truth[wrong]).any()  # the rules alone
+
+
+def test_a_marker_the_two_passes_put_apart_is_not_confident_whichever_name_is_kept():
+    """For 40 frames the forward pass names the left wrist 30 cm from where the backward pass
+    names it, and no rule decides between them (no rename, no residuals to compare): the forward
+    name is kept, but the output's bounds of the left wrist and elbow say it may be 30 cm off,
+    while the legs, which both passes name alike, stay confident."""
+    truth, packets, t, server, fwd = _take(blackout=(0, 0))
+    bad = PassResult(fwd.markers.copy(), fwd.renamed.copy(), fwd.margin.copy())
+    off = np.arange(150, 190)
+    bad.markers[off, LW] += [0.0, 0.3, 0.0]
+    _joints, extra = relabel_both_ways(server, packets, t, bad)
+    assert np.allclose(extra["markers"][off, LW], bad.markers[off, LW])
+    bound = extra["joint_bound"][off]
+    left_arm = [JOINT_NAMES.index("left_wrist"), JOINT_NAMES.index("left_elbow")]
+    assert (bound[:, left_arm] >= 0.29).all()
+    legs = [JOINT_NAMES.index(n) for n in ("left_knee", "right_knee", "left_ankle", "right_ankle")]
+    assert (bound[:, legs] < CONFIDENT_M).all()  # the doubt stays with the arm
 
 
 def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
