@@ -124,7 +124,8 @@ def test_a_naming_the_solver_cannot_fit_gives_way_to_the_backward_one_that_it_fi
     two-way rule doubts it), while the backward pass names both knees right. Solved, the
     forward names put the right knee where the subject's right shin cannot reach: the solver's
     residual says which naming is a body. The backward names are taken there, and only there.
-    Where the forward naming fits as well (as knees swapped both ways may) it stays; without
+    Where the forward naming fits as well (as knees swapped both ways may), where the backward
+    one fits no body well either, or where the forward one was not solved, it stays; without
     residuals the other two-way rules leave those frames wrong."""
     truth, packets, t, server, fwd = _take(blackout=(0, 0))
     bwd = backward_pass(server, packets, t)
@@ -142,6 +143,15 @@ def test_a_naming_the_solver_cannot_fit_gives_way_to_the_backward_one_that_it_fi
     swapped = replace(bad, markers=fwd.markers.copy(), residual=bwd.residual)  # knees swapped, fitting as well
     swapped.markers[np.ix_(wrong, [LK, RK])] = fwd.markers[np.ix_(wrong, [RK, LK])]
     assert np.array_equal(choose(swapped, bwd, t)[0][wrong], swapped.markers[wrong])
+    # the better of two bad fits is no verdict (the database fits an uncrossed naming of crossed
+    # feet better than the truth): backward names 1 cm off are not taken from forward ones 3 cm off
+    poor_b = replace(bwd, residual=np.where(np.isin(np.arange(len(t)), wrong), 0.01, bwd.residual))
+    poor_f = replace(swapped, residual=np.where(np.isin(np.arange(len(t)), wrong), 0.03, bwd.residual))
+    assert np.array_equal(choose(poor_f, poor_b, t)[0][wrong], swapped.markers[wrong])
+    assert _right(choose(poor_f, bwd, t)[0][wrong], truth[wrong]).all()  # against a good fit they give way
+    # nor frames whose forward solve judged nothing (no residual: the subject still being measured)
+    unjudged = replace(bad, residual=np.where(np.isin(np.arange(len(t)), wrong), np.nan, bad.residual))
+    assert not _right(choose(unjudged, bwd, t)[0][wrong], truth[wrong]).any()
     assert not _right(choose(replace(bad, residual=None), bwd, t)[0][wrong], truth[wrong]).any()  # the rules alone
 
 
