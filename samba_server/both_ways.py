@@ -89,13 +89,13 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   other knee's point for 2 s, 5-19 mm against 0.4-2.4 mm; a climber's shoulder and wrists
   confused for 2 s). Only where the backward names fit well (rms within ``FIT_GOOD_M``, 7 mm):
   the better of two bad fits is no verdict (the database fits an uncrossed naming of crossed
-  feet better than the truth). On saved passes of bodies no rule was
-  traced on (4 cameras, the 49 clips on seeds 501-503 with the blackout anywhere in the
-  motion and on 501 with it mid-motion: 196 takes) frames not all right 2241 -> 1928; seeds 3
-  and 11, which the rules were traced on, 426 -> 435; the high and the mixed-height rigs (seed
-  3) 1025 -> 686 and 815 -> 775. Not the other way round (forward names
-  fitting better replacing backward names a rule took): about 50 frames fewer not all right,
-  but 26 more with a wrong name.
+  feet better than the truth). On saved passes of bodies no rule was traced on (4 cameras, the
+  49 clips on seeds 501-503 with the blackout anywhere in the motion and on 501 with it
+  mid-motion: 196 takes) frames not all right 2241 -> 1928; seeds 3 and 11, which the rules
+  were traced on, 426 -> 435; the high and the mixed-height rigs (seed 3) 1025 -> 686 and 815
+  -> 775. Not the other way round (forward names fitting better replacing backward names a
+  rule took): about 50 frames fewer not all right, but 26 more with a wrong name. With three
+  cameras or more: with two, every 2-view point fits some body (14 takes: 1116 -> 1161).
 
 Otherwise a naming that neither pass corrected is not overruled by the other: the backward
 pass starts mid-motion at the end of the take, with no standard pose, and its first
