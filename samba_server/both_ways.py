@@ -476,7 +476,7 @@ def _misfit(p: PassResult, frames: np.ndarray) -> float:
     return float((n * np.nan_to_num(r) ** 2 + (N_MARKERS - n) * FIT_UNNAMED_M**2).sum())
 
 
-def _fits_better(fwd: PassResult, bwd: PassResult) -> np.ndarray:
+def _fits_better(fwd: PassResult, bwd: PassResult, both: np.ndarray) -> np.ndarray:
     """(F,) bool: the frames of each stretch where the two passes name the markers differently
     (some marker named by one pass only, or at points more than 1 cm apart) whose backward names
     fit the solver well (rms within ``FIT_GOOD_M``) and by ``FIT_RATIO`` times and
@@ -485,14 +485,14 @@ def _fits_better(fwd: PassResult, bwd: PassResult) -> np.ndarray:
     nothing): the reconstruction's fit as the judge of two namings no rule told apart. Where
     neither naming fits a body well, the better of two bad fits is no verdict: the database
     fits an uncrossed naming of crossed feet better than the truth (a dance on the mixed-height
-    rig: 99.2 -> 58.9 % of frames all right without that bound). False everywhere when a pass
-    has no residuals."""
+    rig: 99.2 -> 58.9 % of frames all right without that bound). both: (F, 8) bool, the two
+    name marker m at the same point. False everywhere when a pass has no residuals."""
     F = len(fwd.markers)
     out = np.zeros(F, bool)
     if fwd.residual is None or bwd.residual is None:
         return out
     nf, nb = np.isfinite(fwd.markers).all(axis=2).any(axis=1), np.isfinite(bwd.markers).all(axis=2).any(axis=1)
-    differ = ~_within(fwd.markers, bwd.markers).all(axis=1) & (nf | nb)
+    differ = ~both.all(axis=1) & (nf | nb)
     judged = (np.isfinite(fwd.residual) | ~nf) & (np.isfinite(bwd.residual) | ~nb)
     edges = np.flatnonzero(np.diff(np.r_[0, differ.astype(np.int8), 0]))
     for a, b in zip(edges[::2], edges[1::2]):
@@ -600,7 +600,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         markers[hit & _within(markers[:, w], bwd.markers[:, s]), w] = np.nan
         from_b |= hit
     markers, course = _on_course(markers, bwd.markers, t)
-    better = _fits_better(fwd, bwd) if fit else np.zeros(len(t), bool)
+    better = _fits_better(fwd, bwd, both) if fit else np.zeros(len(t), bool)
     markers[better] = bwd.markers[better]
     return markers, from_b | course | better
 

@@ -73,11 +73,10 @@ def joint_bounds(joints: np.ndarray, at_markers: np.ndarray, novelty: float, len
     of the marker joints (see :func:`marker_bounds`), the frame's novelty (m; NaN counts as
     ``NOVELTY_CAP`` for the elbows and as 1 m for hips and head) and the subject's bone lengths
     (8,) m. NaN joints get inf."""
-    out = np.full(N_JOINTS, np.inf)
     if not np.isfinite(joints).all():
-        return out
+        return np.full(N_JOINTS, np.inf)
     nov = float(novelty) if np.isfinite(novelty) else 1.0
-    out[:] = 0.0
+    out = np.zeros(N_JOINTS)
     for elbow, sh, wr in _ARMS:
         r = swivel_radius(joints[sh], joints[wr], float(lengths[_UPPER_ARM]), float(lengths[_FOREARM]))
         out[elbow] = r * (ELBOW_SWIVEL + 0.5 * min(nov, NOVELTY_CAP))
