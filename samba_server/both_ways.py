@@ -24,7 +24,9 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   there the backward name was right: 4 cameras, 49 takes, seeds 3 and 11, 489 -> 469 frames
   not all right; the same cut of the forward doubt lost, 489 -> 552), the frame takes the
   backward name, and the backward names of the markers the forward pass left unnamed; every
-  marker's when the two namings agree as a whole at the rename. The names a pass corrects
+  marker's of the renamed markers' half of the body (the legs; the shoulders and wrists) when
+  the two namings agree as a whole at the rename (a rename of the ankles says nothing of the
+  wrists). The names a pass corrects
   were wrong for a while before the correction; a rename the backward pass does not confirm
   may itself be the mistake. Where a kept forward name and a taken backward one fall on one
   point, neither stands (the two passes dispute it); a mix that would still name one point
@@ -81,10 +83,10 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   frames not all right; of six other sets of saved passes, two rigs and older labellers,
   five lost 11-23 frames each and one gained 1).
 
-- last, where the two passes name the markers differently over a stretch of frames and the
+- last, where the two passes name markers at points apart over a run of frames and the
   backward names fit the solver ``FIT_RATIO`` (2) times better than the forward ones, and by
   ``FIT_GAIN_M2`` (:func:`_misfit`: each pass's own solve residuals, a marker left unnamed
-  counting as one ``FIT_UNNAMED_M`` off), the stretch takes the backward names: the
+  counting as one ``FIT_UNNAMED_M`` off), the run takes the backward names: the
   reconstruction's fit judges two namings no rule told apart (a dribbler's knee named on the
   other knee's point for 2 s, 5-19 mm against 0.4-2.4 mm; a climber's shoulder and wrists
   confused for 2 s). Only where the backward names fit well (rms within ``FIT_GOOD_M``, 7 mm):
@@ -93,7 +95,9 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   49 clips on seeds 501-503 with the blackout anywhere in the motion and on 501 with it
   mid-motion: 196 takes) frames not all right 2241 -> 1928; seeds 3 and 11, which the rules
   were traced on, 426 -> 435; the high and the mixed-height rigs (seed 3) 1025 -> 686 and 815
-  -> 775. Not the other way round (forward names fitting better replacing backward names a
+  -> 775 (judged per run since the twenty-fifth session, frames where the passes differ only
+  in a marker one leaves unnamed ending a run: with the halves rule above 1928 -> 1879, 435 ->
+  425, 1461 -> 1424 both rigs). Not the other way round (forward names fitting better replacing backward names a
   rule took): about 50 frames fewer not all right, but 26 more with a wrong name. With three
   cameras or more: with two, every 2-view point fits some body (14 takes: 1116 -> 1161).
 
@@ -123,12 +127,16 @@ from samba_common.skeleton import N_MARKERS
 
 from .labelling import bit_markers, marker_bits
 from .labelling.labeller import facing_of
-from .labelling.rigid import LS, LW, RS, RW
+from .labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from .recon.bounds import widened
 from .recon.reconstruct import solve_both_ways
 from .server import Server, ServerConfig
 
 log = logging.getLogger(__name__)
+
+#: bit sets of the two halves of the body a rename confirmed as a whole speaks for
+_UPPER = (1 << LS) | (1 << RS) | (1 << LW) | (1 << RW)
+_LEGS = (1 << LK) | (1 << RK) | (1 << LA) | (1 << RA)
 
 __all__ = ["PassResult", "backward_pass", "choose", "disputed_m", "end_facing", "loose_of", "relabel_both_ways"]
 
@@ -477,30 +485,48 @@ def _misfit(p: PassResult, frames: np.ndarray) -> float:
 
 
 def _fits_better(fwd: PassResult, bwd: PassResult, both: np.ndarray) -> np.ndarray:
-    """(F,) bool: the frames of each stretch where the two passes name the markers differently
-    (some marker named by one pass only, or at points more than 1 cm apart) whose backward names
-    fit the solver well (rms within ``FIT_GOOD_M``) and by ``FIT_RATIO`` times and
-    ``FIT_GAIN_M2`` better than the forward ones (:func:`_misfit`, over the frames where each
-    pass that names a marker has a residual: a solver still measuring the subject judged
-    nothing): the reconstruction's fit as the judge of two namings no rule told apart. Where
-    neither naming fits a body well, the better of two bad fits is no verdict: the database
-    fits an uncrossed naming of crossed feet better than the truth (a dance on the mixed-height
-    rig: 99.2 -> 58.9 % of frames all right without that bound). both: (F, 8) bool, the two
-    name marker m at the same point. False everywhere when a pass has no residuals."""
+    """(F,) bool: the frames of each run where the two passes name some marker at points more
+    than 1 cm apart (each frame) whose backward names fit the solver well (rms within ``FIT_GOOD_M``) and by
+    ``FIT_RATIO`` times and ``FIT_GAIN_M2`` better than the forward ones (:func:`_misfit`, over
+    the frames where each pass that names a marker has a residual: a solver still measuring
+    the subject judged nothing): the reconstruction's fit as the judge of two namings no rule
+    told apart. Where neither naming fits a body well, the better of two bad fits is no
+    verdict: the database fits an uncrossed naming of crossed feet better than the truth (a
+    dance on the mixed-height rig: 99.2 -> 58.9 % of frames all right without that bound).
+    Frames where the two differ only in markers one of them leaves unnamed are not judged and
+    end a run: the wrists named the wrong way round by the backward pass, then alike but for a
+    hidden hand, then the forward pass's wrists wrong, are two verdicts, not one that gave the
+    backward names to both (002_09 on a fresh body). both: (F, 8) bool, the two name marker m
+    at the same point. False everywhere when a pass has no residuals."""
     F = len(fwd.markers)
     out = np.zeros(F, bool)
     if fwd.residual is None or bwd.residual is None:
         return out
-    nf, nb = np.isfinite(fwd.markers).all(axis=2).any(axis=1), np.isfinite(bwd.markers).all(axis=2).any(axis=1)
-    differ = ~both.all(axis=1) & (nf | nb)
-    judged = (np.isfinite(fwd.residual) | ~nf) & (np.isfinite(bwd.residual) | ~nb)
-    edges = np.flatnonzero(np.diff(np.r_[0, differ.astype(np.int8), 0]))
-    for a, b in zip(edges[::2], edges[1::2]):
+    nfm, nbm = np.isfinite(fwd.markers).all(axis=2), np.isfinite(bwd.markers).all(axis=2)
+    judged = (np.isfinite(fwd.residual) | ~nfm.any(axis=1)) & (np.isfinite(bwd.residual) | ~nbm.any(axis=1))
+    apart = (nfm & nbm & ~both).any(axis=1)  # some marker named by both, at points apart
+
+    def judge(a: int, b: int) -> None:
         frames = a + np.flatnonzero(judged[a:b])
         e_f, e_b = _misfit(fwd, frames), _misfit(bwd, frames)
         well = e_b <= FIT_GOOD_M**2 * N_MARKERS * len(frames)
         out[a:b] = well and e_b * FIT_RATIO < e_f and e_f - e_b > FIT_GAIN_M2
+
+    for a, b in _runs(apart):
+        judge(a, b)
     return out
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of each run of True in mask (F,) bool, stop exclusive."""
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def _halves(renamed: np.ndarray) -> np.ndarray:
+    """(F,) int bits: every marker of each half of the body (the legs; the shoulders and wrists)
+    in which renamed ((F,) int bits) has a marker."""
+    return np.where(renamed & _LEGS, _LEGS, 0) | np.where(renamed & _UPPER, _UPPER, 0)
 
 
 def _doubles(markers: np.ndarray) -> int:
@@ -512,7 +538,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
            picked_up: bool = True, fit: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Per frame and marker the forward name, or the backward one where the forward pass
     doubted its own (a rename the backward naming confirms: the renamed markers, or every
-    marker where the two namings agree as a whole at the rename) and the backward pass names
+    marker of their halves of the body where the two namings agree as a whole at the rename) and the backward pass names
     it and did not doubt it (with the markers the forward pass left unnamed in that frame), and
     every name of a frame the forward pass names nothing in (see the module docstring); the
     backward names across a gap in the forward names of a marker that they continue
@@ -530,8 +556,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     (:func:`_disputed`); a frame whose mixed names would still name one point twice more
     often than the forward names keeps the forward ones. Last, a short stretch where the chosen
     name leaves the backward one between frames the two agree on takes the backward name where
-    it follows the marker's course better (:func:`_on_course`), and a stretch where the two
-    differ takes the backward names where they fit the solver clearly better
+    it follows the marker's course better (:func:`_on_course`), and a run where the two
+    name markers at points apart takes the backward names where they fit the solver clearly better
     (:func:`_fits_better`; not with ``fit`` False, as with two cameras). Returns ((F, 8, 3)
     markers, (F,) bool: a name taken from the backward pass)."""
     nf = np.isfinite(fwd.markers).all(axis=2)
@@ -542,12 +568,13 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     # there (not renaming them itself), names at the same points (a marker the rename left
     # unnamed: where the forward pass names it next, within NEXT_S); when it is confirmed for
     # all of them and the two namings agree as a whole (>= 4 markers named by both, none named
-    # otherwise), for every marker
+    # otherwise), for every marker of the halves of the body it renamed (the legs; the shoulders
+    # and wrists)
     alike = marker_bits(both | _renamed_to_none(fwd.renamed, nf, nb, both, t))
     agree = alike & ~bwd.renamed.astype(np.int64)
     renamed = fwd.renamed.astype(np.int64)
     whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
-    confirmed = np.where(whole & (renamed != 0), marker_bits(np.ones(N_MARKERS, bool)), renamed & agree)
+    confirmed = np.where(whole & (renamed != 0), _halves(renamed), renamed & agree)
     doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True) | _apart_before(confirmed, same, t)
     # and the other way round: a backward rename counts where the forward pass names those
     # markers at the same points (tracking them, not renaming them)

@@ -486,7 +486,11 @@ class Labeller:
             crossed = [(lm, rm) for lm, rm in ((LK, RK), (LA, RA))
                        if assign[lm] >= 0 and assign[rm] >= 0 and assign[lm] != assign[rm]
                        and float((out[rm] - out[lm]) @ right) < -cfg.crossed_m]
-            if crossed:
+            # both pairs crossed is a whole-leg swap, which keeps both shins: they cannot tell
+            # it from a stance turned against the shoulders (a dancer twisting against her
+            # hips; a fencer), which is named so. The knees' hold decides (_uncross_knees).
+            # With three cameras or more (measured there; with two the rule stays as it was)
+            if len(crossed) == 1 or (crossed and len(self.rig) < 3):
                 swapped = out.copy()
                 for lm, rm in crossed:
                     swapped[[lm, rm]] = out[[rm, lm]]
@@ -494,6 +498,7 @@ class Labeller:
                 if slack < 0 and len(self.rig) >= 3 and not np.isfinite(out[[LK, RK, LA, RA]]).all():
                     slack = -cfg.cross_gain_m
                 if self._body.shin_misfit(swapped) <= self._body.shin_misfit(out) + slack:
+                    log.debug("t=%.3f s: %s uncrossed", t, crossed)
                     for lm, rm in crossed:
                         self._renamed |= (1 << lm) | (1 << rm)
                         assign[[lm, rm]], arow[[lm, rm]], out[[lm, rm]] = assign[[rm, lm]], arow[[rm, lm]], out[[rm, lm]]

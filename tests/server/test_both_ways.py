@@ -155,6 +155,32 @@ def test_a_naming_the_solver_cannot_fit_gives_way_to_the_backward_one_that_it_fi
     assert not _right(choose(replace(bad, residual=None), bwd, t)[0][wrong], truth[wrong]).any()  # the rules alone
 
 
+def test_the_fit_judges_each_run_of_disagreeing_names_on_its_own():
+    """The backward pass names the wrists the wrong way round in frames 90-119 (fitting as
+    well as the forward names: a swap no solve tells), then leaves the left wrist unnamed to
+    frame 149 where the forward pass names it, and from 150 to 179 the forward pass names the
+    right knee on the left knee's point (fitting no body). The two runs where the passes name
+    markers at points apart are judged apart: the knees take the backward names, the wrists keep
+    the forward ones (judged as one stretch, the bad knees gave the backward pass the wrists too:
+    a fresh body's wrists swapped for 0.5 s)."""
+    truth, packets, t, server, fwd = _take(blackout=(0, 0))
+    bwd = backward_pass(server, packets, t)
+    assert _right(bwd.markers[20:], truth[20:]).all()
+    knees, wrists, hidden = np.arange(150, 180), np.arange(90, 120), np.arange(120, 150)
+    bad = PassResult(fwd.markers.copy(), fwd.renamed.copy(), fwd.margin.copy())
+    bad.markers[knees, RK] = bad.markers[knees, LK]
+    bad.markers[knees, LK] = np.nan
+    rec = server.reconstructor.again(server.subject)
+    bad.residual = np.array([r.residual for r in solve_frames(rec, bad.markers, t, range(len(t)))])
+    swapped = replace(bwd, markers=bwd.markers.copy(), residual=bwd.residual.copy())
+    swapped.markers[np.ix_(wrists, [LW, RW])] = bwd.markers[np.ix_(wrists, [RW, LW])]
+    swapped.residual[wrists] = bad.residual[wrists]  # as well as the forward names
+    swapped.markers[hidden, LW] = np.nan
+    markers, _from_b = choose(bad, swapped, t)
+    assert _right(markers[knees], truth[knees]).all()
+    assert _right(markers[wrists], truth[wrists]).all() and _right(markers[hidden], truth[hidden]).all()
+
+
 def test_a_marker_the_two_passes_put_apart_is_not_confident_whichever_name_is_kept():
     """For 40 frames the forward pass names the left wrist 30 cm from where the backward pass
     names it, and no rule decides between them (no rename, no residuals to compare): the forward
@@ -178,8 +204,10 @@ def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
     the second before the forward pass renamed its markers at 200 to what the backward pass
     names (there the backward one is taken, for the markers renamed), unless the backward pass
     renamed its own in the second after to names the forward pass confirms; a rename the backward pass does not confirm (names
-    otherwise, or renamed itself at that frame) changes nothing; a frame the forward pass names
-    nothing in takes the backward names."""
+    otherwise, or renamed itself at that frame) changes nothing; a rename of some markers where
+    the two namings agree as a whole speaks for their half of the body (the legs; the shoulders
+    and wrists), not the other half; a frame the forward pass names nothing in takes the
+    backward names."""
     F = 301
     t = np.arange(F) / FPS
     a = np.zeros((F, 8, 3))
@@ -224,6 +252,10 @@ def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
     b[200:, [LW, RW]] -= 0.3  # agreeing as a whole: every marker the backward way
     markers, from_b = choose(fwd, bwd, t)
     assert np.allclose(markers[140:200], b[140:200])
+    ren_f[200] = (1 << LA) | (1 << RA)  # agreeing as a whole at a rename of the ankles: the legs
+    markers, from_b = choose(fwd, bwd, t)  # the backward way, the shoulders and wrists as they were
+    legs = [LK, RK, LA, RA]
+    assert np.allclose(markers[140:200, legs], b[140:200, legs]) and np.allclose(markers[140:200, :LK], 0.0)
     ren_f[200] = 0
     a[20:30] = np.nan  # forward names nothing: the backward names fill in
     markers, from_b = choose(fwd, bwd, t)

@@ -495,6 +495,38 @@ def test_a_leg_crossing_over_the_other_keeps_its_names():
     assert right[10:].all(), np.argwhere(~right[10:])[:5]
 
 
+def test_a_stance_turned_against_the_shoulders_keeps_its_names_when_a_knee_comes_back():
+    """A fencer's stance: the left foot steps 30 cm forward, the right one back, while the
+    shoulders turn 90 degrees to the left. Along the shoulders' right both knees and both
+    ankles are then crossed, with every name right. The left knee is hidden for a frame; when
+    it came back (its track stale), "legs do not cross" saw both pairs crossed and swapped
+    both (a whole-leg swap keeps both shins, so the shins could not object): every leg marker
+    named wrong (a dancer twisting against her hips, 005_17 on a fresh body: 1.2 s). A
+    whole-leg swap is left to the knees' one-second hold."""
+    rig = default_rig(4)
+    stand = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    turned = stand.copy()
+    shin = float(np.linalg.norm(stand[LK] - stand[LA]))
+    for k, a, dy in ((LK, LA, 1.0), (RK, RA, -1.0)):
+        turned[k, 1] += 0.12 * dy
+        turned[a, 1] += 0.30 * dy
+        turned[a, 2] = turned[k, 2] - np.sqrt(shin ** 2 - float(np.sum((turned[a, :2] - turned[k, :2]) ** 2)))
+    n = 100
+    truth = _blend(stand, turned, n, 10, 40)  # the legs step ...
+    mid = 0.5 * (stand[LS] + stand[RS])
+    up = [LS, RS, LW, RW]
+    for i, th in enumerate(0.5 * np.pi * np.clip((np.arange(n) - 10) / 40.0, 0.0, 1.0)):
+        rot = np.array([[np.cos(th), -np.sin(th), 0.0], [np.sin(th), np.cos(th), 0.0], [0.0, 0.0, 1.0]])
+        truth[i, up] = (stand[up] - mid) @ rot.T + mid  # ... as the shoulders turn to the left
+    right = np.array([0.0, 1.0, 0.0])  # the turned subject's right
+    assert (truth[-1, RK] - truth[-1, LK]) @ right < -0.2 and (truth[-1, RA] - truth[-1, LA]) @ right < -0.2
+    truth[70, LK] = np.nan  # hidden for a frame, 0.33 s into the held stance
+    named = _run(_measured(rig, True), rig, truth, np.random.default_rng(12))
+    ok = _right(named, truth)
+    assert ok[:70].all(), np.argwhere(~ok[:70])[:5]
+    assert ok[71:].all(), np.argwhere(~ok[71:])[:5]  # up to 1 s into the crossing (the knees' hold)
+
+
 def _points_from_blobs(blobs: list, config: PointsConfig | None = None) -> Points3D:
     """3D points of one frame of the default 4-camera rig from per-camera blob lists
     [[u, v, capacity, radius (px)], ...] (a traced frame of a rendered take), with the
