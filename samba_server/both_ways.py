@@ -26,9 +26,8 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   backward name, and the backward names of the markers the forward pass left unnamed; every
   marker's of the renamed markers' half of the body (the legs; the shoulders and wrists) when
   the two namings agree as a whole at the rename (a rename of the ankles says nothing of the
-  wrists). The names a pass corrects
-  were wrong for a while before the correction; a rename the backward pass does not confirm
-  may itself be the mistake. Where a kept forward name and a taken backward one fall on one
+  wrists). The names a pass corrects were wrong for a while before the correction; a rename
+  the backward pass does not confirm may itself be the mistake. Where a kept forward name and a taken backward one fall on one
   point, neither stands (the two passes dispute it); a mix that would still name one point
   twice keeps the forward names;
 - where a forward rename gave a marker another point while the backward pass, not doubting
@@ -97,8 +96,8 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   were traced on, 426 -> 435; the high and the mixed-height rigs (seed 3) 1025 -> 686 and 815
   -> 775 (judged per run since the twenty-fifth session, frames where the passes differ only
   in a marker one leaves unnamed ending a run: with the halves rule above 1928 -> 1879, 435 ->
-  425, 1461 -> 1424 both rigs). Not the other way round (forward names fitting better replacing backward names a
-  rule took): about 50 frames fewer not all right, but 26 more with a wrong name. With three
+  425, 1461 -> 1424 both rigs). Not the other way round (forward names fitting better
+  replacing backward names a rule took): about 50 frames fewer not all right, but 26 more with a wrong name. With three
   cameras or more: with two, every 2-view point fits some body (14 takes: 1116 -> 1161).
 
 Otherwise a naming that neither pass corrected is not overruled by the other: the backward
@@ -486,8 +485,9 @@ def _misfit(p: PassResult, frames: np.ndarray) -> float:
 
 def _fits_better(fwd: PassResult, bwd: PassResult, both: np.ndarray) -> np.ndarray:
     """(F,) bool: the frames of each run where the two passes name some marker at points more
-    than 1 cm apart (each frame) whose backward names fit the solver well (rms within ``FIT_GOOD_M``) and by
-    ``FIT_RATIO`` times and ``FIT_GAIN_M2`` better than the forward ones (:func:`_misfit`, over
+    than 1 cm apart (in each frame) whose backward names fit the solver well (rms within
+    ``FIT_GOOD_M``) and by ``FIT_RATIO`` times and ``FIT_GAIN_M2`` better than the forward
+    ones (:func:`_misfit`, over
     the frames where each pass that names a marker has a residual: a solver still measuring
     the subject judged nothing): the reconstruction's fit as the judge of two namings no rule
     told apart. Where neither naming fits a body well, the better of two bad fits is no
@@ -505,15 +505,11 @@ def _fits_better(fwd: PassResult, bwd: PassResult, both: np.ndarray) -> np.ndarr
     nfm, nbm = np.isfinite(fwd.markers).all(axis=2), np.isfinite(bwd.markers).all(axis=2)
     judged = (np.isfinite(fwd.residual) | ~nfm.any(axis=1)) & (np.isfinite(bwd.residual) | ~nbm.any(axis=1))
     apart = (nfm & nbm & ~both).any(axis=1)  # some marker named by both, at points apart
-
-    def judge(a: int, b: int) -> None:
+    for a, b in _runs(apart):
         frames = a + np.flatnonzero(judged[a:b])
         e_f, e_b = _misfit(fwd, frames), _misfit(bwd, frames)
         well = e_b <= FIT_GOOD_M**2 * N_MARKERS * len(frames)
         out[a:b] = well and e_b * FIT_RATIO < e_f and e_f - e_b > FIT_GAIN_M2
-
-    for a, b in _runs(apart):
-        judge(a, b)
     return out
 
 
@@ -538,8 +534,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
            picked_up: bool = True, fit: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Per frame and marker the forward name, or the backward one where the forward pass
     doubted its own (a rename the backward naming confirms: the renamed markers, or every
-    marker of their halves of the body where the two namings agree as a whole at the rename) and the backward pass names
-    it and did not doubt it (with the markers the forward pass left unnamed in that frame), and
+    marker of their halves of the body where the two namings agree as a whole at the rename)
+    and the backward pass names it and did not doubt it (with the markers the forward pass left unnamed in that frame), and
     every name of a frame the forward pass names nothing in (see the module docstring); the
     backward names across a gap in the forward names of a marker that they continue
     (:func:`_bridged`); and
@@ -556,8 +552,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     (:func:`_disputed`); a frame whose mixed names would still name one point twice more
     often than the forward names keeps the forward ones. Last, a short stretch where the chosen
     name leaves the backward one between frames the two agree on takes the backward name where
-    it follows the marker's course better (:func:`_on_course`), and a run where the two
-    name markers at points apart takes the backward names where they fit the solver clearly better
+    it follows the marker's course better (:func:`_on_course`), and a run where the two name
+    markers at points apart takes the backward names where they fit the solver clearly better
     (:func:`_fits_better`; not with ``fit`` False, as with two cameras). Returns ((F, 8, 3)
     markers, (F,) bool: a name taken from the backward pass)."""
     nf = np.isfinite(fwd.markers).all(axis=2)
