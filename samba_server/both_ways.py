@@ -27,9 +27,9 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   marker's of the renamed markers' half of the body (the legs; the shoulders and wrists) when
   the two namings agree as a whole at the rename (a rename of the ankles says nothing of the
   wrists). The names a pass corrects were wrong for a while before the correction; a rename
-  the backward pass does not confirm may itself be the mistake. Where a kept forward name and a taken backward one fall on one
-  point, neither stands (the two passes dispute it); a mix that would still name one point
-  twice keeps the forward names;
+  the backward pass does not confirm may itself be the mistake. Where a kept forward name and
+  a taken backward one fall on one point, neither stands (the two passes dispute it); a mix
+  that would still name one point twice keeps the forward names;
 - where a forward rename gave a marker another point while the backward pass, not doubting
   it, names it at the point both passes named it through the ``AGREED_S`` before, the
   backward name holds from the rename until the two name it alike again: the forward pass's
@@ -97,8 +97,9 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   -> 775 (judged per run since the twenty-fifth session, frames where the passes differ only
   in a marker one leaves unnamed ending a run: with the halves rule above 1928 -> 1879, 435 ->
   425, 1461 -> 1424 both rigs). Not the other way round (forward names fitting better
-  replacing backward names a rule took): about 50 frames fewer not all right, but 26 more with a wrong name. With three
-  cameras or more: with two, every 2-view point fits some body (14 takes: 1116 -> 1161).
+  replacing backward names a rule took): about 50 frames fewer not all right, but 26 more
+  with a wrong name. With three cameras or more: with two, every 2-view point fits some body
+  (14 takes: 1116 -> 1161).
 
 Otherwise a naming that neither pass corrected is not overruled by the other: the backward
 pass starts mid-motion at the end of the take, with no standard pose, and its first
@@ -352,6 +353,12 @@ def _renamed_to_none(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike:
     return out
 
 
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of each run of True in mask (F,) bool, stop exclusive."""
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
 def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray) -> np.ndarray:
     """(F, 8) bool: the frames of each gap in the forward pass's names of a marker (a hand
     hidden from a view, a point the points stage did not make) that the backward pass names
@@ -362,8 +369,7 @@ def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray) -> np.ndarray:
     F = len(nf)
     out = np.zeros_like(nf)
     for m in range(nf.shape[1]):
-        gaps = np.flatnonzero(np.diff(np.r_[1, nf[:, m].astype(np.int8), 1]))  # starts, ends of the gaps
-        for a, b in zip(gaps[::2], gaps[1::2]):
+        for a, b in _runs(~nf[:, m]):  # the gaps
             if a > 0 and alike[a - 1, m]:
                 run = np.flatnonzero(~nb[a:b, m])
                 out[a:a + (run[0] if run.size else b - a), m] = True
@@ -411,9 +417,8 @@ def _picked_up(fwd: np.ndarray, bwd: np.ndarray) -> list[tuple[int, int, int, in
         for b in range(N_MARKERS):
             if a == b:
                 continue
-            frames = np.flatnonzero(nf[:, a] & ~nf[:, b] & _within(fwd[:, a], bwd[:, b]))
-            for run in np.split(frames, np.flatnonzero(np.diff(frames) > 1) + 1) if frames.size else []:
-                k0, k1 = int(run[0]), int(run[-1])
+            for k0, stop in _runs(nf[:, a] & ~nf[:, b] & _within(fwd[:, a], bwd[:, b])):
+                k1 = stop - 1
                 if 0 < k0 and k1 < F - 1 and not nf[k0 - 1, a] and nb[k1 + 1, b]:
                     out.append((a, b, k0, k1))
     return out
@@ -483,40 +488,34 @@ def _misfit(p: PassResult, frames: np.ndarray) -> float:
     return float((n * np.nan_to_num(r) ** 2 + (N_MARKERS - n) * FIT_UNNAMED_M**2).sum())
 
 
-def _fits_better(fwd: PassResult, bwd: PassResult, both: np.ndarray) -> np.ndarray:
+def _fits_better(fwd: PassResult, bwd: PassResult, nf: np.ndarray, nb: np.ndarray,
+                 both: np.ndarray) -> np.ndarray:
     """(F,) bool: the frames of each run where the two passes name some marker at points more
     than 1 cm apart (in each frame) whose backward names fit the solver well (rms within
     ``FIT_GOOD_M``) and by ``FIT_RATIO`` times and ``FIT_GAIN_M2`` better than the forward
-    ones (:func:`_misfit`, over
-    the frames where each pass that names a marker has a residual: a solver still measuring
-    the subject judged nothing): the reconstruction's fit as the judge of two namings no rule
-    told apart. Where neither naming fits a body well, the better of two bad fits is no
-    verdict: the database fits an uncrossed naming of crossed feet better than the truth (a
+    ones (:func:`_misfit`, over the frames where each pass that names a marker has a
+    residual: a solver still measuring the subject judged nothing): the reconstruction's fit
+    as the judge of two namings no rule told apart. Where neither naming fits a body well, the
+    better of two bad fits is no verdict: the database fits an uncrossed naming of crossed feet better than the truth (a
     dance on the mixed-height rig: 99.2 -> 58.9 % of frames all right without that bound).
     Frames where the two differ only in markers one of them leaves unnamed are not judged and
     end a run: the wrists named the wrong way round by the backward pass, then alike but for a
     hidden hand, then the forward pass's wrists wrong, are two verdicts, not one that gave the
-    backward names to both (002_09 on a fresh body). both: (F, 8) bool, the two name marker m
-    at the same point. False everywhere when a pass has no residuals."""
+    backward names to both (002_09 on a fresh body). nf, nb: (F, 8) bool, the forward,
+    backward pass names marker m; both: (F, 8) bool, the two name it at the same point. False
+    everywhere when a pass has no residuals."""
     F = len(fwd.markers)
     out = np.zeros(F, bool)
     if fwd.residual is None or bwd.residual is None:
         return out
-    nfm, nbm = np.isfinite(fwd.markers).all(axis=2), np.isfinite(bwd.markers).all(axis=2)
-    judged = (np.isfinite(fwd.residual) | ~nfm.any(axis=1)) & (np.isfinite(bwd.residual) | ~nbm.any(axis=1))
-    apart = (nfm & nbm & ~both).any(axis=1)  # some marker named by both, at points apart
+    judged = (np.isfinite(fwd.residual) | ~nf.any(axis=1)) & (np.isfinite(bwd.residual) | ~nb.any(axis=1))
+    apart = (nf & nb & ~both).any(axis=1)  # some marker named by both, at points apart
     for a, b in _runs(apart):
         frames = a + np.flatnonzero(judged[a:b])
         e_f, e_b = _misfit(fwd, frames), _misfit(bwd, frames)
         well = e_b <= FIT_GOOD_M**2 * N_MARKERS * len(frames)
         out[a:b] = well and e_b * FIT_RATIO < e_f and e_f - e_b > FIT_GAIN_M2
     return out
-
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """(start, stop) of each run of True in mask (F,) bool, stop exclusive."""
-    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
 def _halves(renamed: np.ndarray) -> np.ndarray:
@@ -535,7 +534,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     """Per frame and marker the forward name, or the backward one where the forward pass
     doubted its own (a rename the backward naming confirms: the renamed markers, or every
     marker of their halves of the body where the two namings agree as a whole at the rename)
-    and the backward pass names it and did not doubt it (with the markers the forward pass left unnamed in that frame), and
+    and the backward pass names it and did not doubt it (with the markers the forward pass
+    left unnamed in that frame), and
     every name of a frame the forward pass names nothing in (see the module docstring); the
     backward names across a gap in the forward names of a marker that they continue
     (:func:`_bridged`); and
@@ -623,7 +623,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         markers[hit & _within(markers[:, w], bwd.markers[:, s]), w] = np.nan
         from_b |= hit
     markers, course = _on_course(markers, bwd.markers, t)
-    better = _fits_better(fwd, bwd, both) if fit else np.zeros(len(t), bool)
+    better = _fits_better(fwd, bwd, nf, nb, both) if fit else np.zeros(len(t), bool)
     markers[better] = bwd.markers[better]
     return markers, from_b | course | better
 
