@@ -26,8 +26,13 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   backward name, and the backward names of the markers the forward pass left unnamed; every
   marker's of the renamed markers' half of the body (the legs; the shoulders and wrists) when
   the two namings agree as a whole at the rename (a rename of the ankles says nothing of the
-  wrists). The names a pass corrects were wrong for a while before the correction; a rename
-  the backward pass does not confirm may itself be the mistake. Where a kept forward name and
+  wrists). Where the two came to name a marker of that half alike at most ``JOIN_S`` before
+  the rename, without the pass renaming it, it is doubted back from before that: the pass
+  mended a swap of the whole half in two steps (a dancer's knees came right by tracking 3
+  frames before a rule renamed the ankles; fresh seeds, 4 cameras: 1325 -> 1299 frames not
+  all right, no take worse on any saved set). The names a pass corrects were wrong for a
+  while before the correction; a rename the backward pass does not confirm may itself be the
+  mistake. Where a kept forward name and
   a taken backward one fall on one point, neither stands (the two passes dispute it); a mix
   that would still name one point twice keeps the forward names;
 - where a forward rename gave a marker another point while the backward pass, not doubting
@@ -156,6 +161,9 @@ AGREED_S = 0.5
 #: last named the marker alike, at most this long (on the harness's takes 3 s and no bound
 #: gave the same)
 APART_S = 3.0
+#: s: ... and for a marker of a rename's half of the body the pass did not rename, from before
+#: an agreement of the two passes at most this long right before the rename
+JOIN_S = 0.1
 #: s: a stretch where the chosen name of a marker leaves the backward one, between frames where
 #: the two name it at the same point, is checked against the marker's course if at most this long
 COURSE_S = 1.0 / 3.0
@@ -292,14 +300,26 @@ def _doubted(renamed: np.ndarray, named: np.ndarray, t: np.ndarray, window_s: fl
     return out
 
 
-def _apart_before(renamed: np.ndarray, same: np.ndarray, t: np.ndarray, max_s: float = APART_S) -> np.ndarray:
+def _apart_before(renamed: np.ndarray, same: np.ndarray, t: np.ndarray, own: np.ndarray | None = None,
+                  max_s: float = APART_S, join_s: float = JOIN_S) -> np.ndarray:
     """(F,) int, bit m set on the frames before a rename of marker m (renamed: (F,) int bits)
     back to where the two passes last named m alike (same: (F, 8) bool), at most max_s s
     before it: the stretch the renamed name had been wrong, however long (a climber's wrist
-    named on the other shoulder's point for 1.9 s before a rule gave the point back)."""
+    named on the other shoulder's point for 1.9 s before a rule gave the point back). A marker
+    of the rename's half of the body the pass did not rename itself (own: (F,) int bits, the
+    pass's ``renamed``) that the two came to name alike at most join_s s before the rename
+    walks back from before that: the pass mended a swap of the whole half in two steps, the
+    tracking one marker, a rule the rest (a dancer's knees came right by themselves 3 frames
+    before a rule renamed the ankles, the legs swapped for 1.3 s before)."""
     out = np.zeros(len(t), np.int64)
     for k, m in zip(*np.nonzero(bit_markers(renamed))):
         j = k - 1
+        if own is not None and not (int(own[k]) >> m) & 1:
+            i = j
+            while i >= 0 and same[i, m] and t[k] - t[i] <= join_s:
+                i -= 1
+            if i >= 0 and t[k] - t[i] <= join_s:
+                j = i
         while j >= 0 and not same[j, m] and t[k] - t[j] <= max_s:
             out[j] |= 1 << m
             j -= 1
@@ -571,7 +591,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     renamed = fwd.renamed.astype(np.int64)
     whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
     confirmed = np.where(whole & (renamed != 0), _halves(renamed), renamed & agree)
-    doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True) | _apart_before(confirmed, same, t)
+    doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True) | _apart_before(confirmed, same, t, own=renamed)
     # and the other way round: a backward rename counts where the forward pass names those
     # markers at the same points (tracking them, not renaming them)
     agree_b = alike & ~renamed

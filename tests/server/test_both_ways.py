@@ -11,7 +11,7 @@ from samba_common.calib import default_rig
 from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
-from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, NEXT_S, PassResult, backward_pass, choose,
+from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, JOIN_S, NEXT_S, PassResult, backward_pass, choose,
                                     end_facing, loose_of, relabel_both_ways)
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from samba_server.recon.bounds import CONFIDENT_M
@@ -446,6 +446,34 @@ def test_a_confirmed_rename_doubts_the_names_back_to_where_the_passes_last_agree
     ren_f[170], ren_f[350] = 0, 1 << LW
     _m, from_b = choose(PassResult(long, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(350 - int(APART_S * FPS), 350))
+
+
+def test_a_swap_of_both_legs_mended_in_two_steps_is_doubted_back_to_where_it_began():
+    """The forward pass names both legs the other way round from frame 100 (a dancer's legs
+    after a turn); at frame 197 its knees come right by tracking, with no rename, and at 200 a
+    rule renames the ankles, where the two passes agree as a whole. The knees are doubted back
+    to frame 100 too, not only the second before the rename: they were swapped with the
+    ankles. Knees that had agreed for longer than JOIN_S before the rename are doubted only
+    in the second before it, as any marker of a rename's half of the body."""
+    F = 300
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)
+    a = b.copy()
+    a[100:200, [LK, RK, LA, RA]] = b[100:200, [RK, LK, RA, LA]]
+    a[197:200, [LK, RK]] = b[197:200, [LK, RK]]  # the knees came right by themselves
+    ren_f = np.zeros(F, np.int64)
+    ren_f[200] = (1 << LA) | (1 << RA)
+    none = np.zeros(F, np.int64)
+    markers, _from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
+    assert np.allclose(markers, b)
+    early = a.copy()
+    k = 200 - int(JOIN_S * FPS) - 3
+    early[k:200, [LK, RK]] = b[k:200, [LK, RK]]  # right for longer: a mend of their own
+    markers, _from_b = choose(PassResult(early, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
+    assert np.allclose(markers[:, [LA, RA]], b[:, [LA, RA]])
+    assert np.allclose(markers[140:, [LK, RK]], b[140:, [LK, RK]])
+    assert np.allclose(markers[100:140, [LK, RK]], early[100:140, [LK, RK]])
 
 
 def test_a_backward_rename_doubts_its_names_only_up_to_where_the_forward_pass_confirmed_them():
