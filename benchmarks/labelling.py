@@ -21,7 +21,11 @@ claims < 20 cm) and the share of joints the bounds flag as unsure,
 re-acquisition time after the blackout, the longest pose output into the blackout, and MPJPE
 next to the same take reconstructed from the true markers (same database and solver, same
 blackout, solved the same way: forwards and backwards merged, or forwards only with
---one-pass).
+--one-pass), and from the true markers only where >= 2 cameras see them (the difference to
+that one is what the names and the 3D points cost; the rest is what the cameras do not see).
+
+A run with some of the camera counts (--cameras 4) keeps the other counts' rows and lines of
+the section it writes.
 
     python benchmarks/labelling.py [--data ../shared/data/cmu-bvh] [--cameras 4 2] [--codec mjpg]
     python benchmarks/labelling.py --start 8   # the clips' later parts, which the default never runs
@@ -33,6 +37,7 @@ blackout, solved the same way: forwards and backwards merged, or forwards only w
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import tempfile
 import time
@@ -43,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _record import record  # noqa: E402
+from _record import DOC, record  # noqa: E402
 
 from samba_common.calib import CameraRig, default_rig  # noqa: E402
 from samba_common.skeleton import MARKER_JOINT  # noqa: E402
@@ -85,14 +90,17 @@ MIN_PART_S = 3.0
 
 
 def true_marker_reference(truth: np.ndarray, t: np.ndarray, blackout: np.ndarray, db, n_lead: int,
-                          both_ways: bool) -> tuple[float, float, float]:
-    """The solver fed the true markers (NaN in the blackout), solved as the scored output is
-    (both_ways: forwards and backwards, merged, as samba-process; else forwards, as live): MPJPE
-    over the motion frames, the share of solved frames with a joint > 20 cm off (what the
-    solver alone gets wrong) and with one so wrong while its bound claims < 20 cm."""
+                          both_ways: bool, seen: np.ndarray | None = None) -> tuple[float, float, float]:
+    """The solver fed the true markers (NaN in the blackout; with seen ((F, 8) bool), only the
+    markers seen there), solved as the scored output is (both_ways: forwards and backwards,
+    merged, as samba-process; else forwards, as live): MPJPE over the motion frames, the share
+    of solved frames with a joint > 20 cm off (what the solver alone gets wrong) and with one so
+    wrong while its bound claims < 20 cm."""
     rec = Reconstructor(db=db)
     markers = truth[:, list(MARKER_JOINT)].copy()
     markers[blackout] = np.nan
+    if seen is not None:
+        markers[~seen] = np.nan
     if both_ways:
         est, results = solve_both_ways(rec, markers, t)
     else:
@@ -107,6 +115,42 @@ def true_marker_reference(truth: np.ndarray, t: np.ndarray, blackout: np.ndarray
     share_sure = float((far & sure).any(axis=1)[ok].mean()) if ok.any() else nan
     ok[:n_lead] = False
     return (float(err[ok].mean()) if ok.any() else nan), share, share_sure
+
+
+def kept_lines(title: str, cameras: list[int]) -> tuple[list[str], list[str]]:
+    """The summary lines and table rows of the recorded section ``title`` in docs/BENCHMARKS.md
+    for the camera counts not in cameras (a run of some counts keeps the others' figures)."""
+    text = DOC.read_text() if DOC.exists() else ""
+    m = re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## |\Z)", text, re.S | re.M)
+    if m is None:
+        return [], []
+    summary, rows = [], []
+    for line in m.group(1).splitlines():
+        head = re.match(r"- (\d+) cameras, ", line)
+        cell = re.match(r"\| [^|]+ \| (\d+) \| ", line)
+        if head and int(head.group(1)) not in cameras:
+            summary.append(line)
+        elif cell and int(cell.group(1)) not in cameras:
+            rows.append(line)
+    return summary, rows
+
+
+def merged(summary: list[str], rows: list[str], old_summary: list[str], old_rows: list[str]) -> tuple[list[str], list[str]]:
+    """This run's summary lines and table rows with the kept ones of other camera counts
+    (:func:`kept_lines`), the lines by camera count (most first), the rows by clip as CLIPS
+    lists them and camera count; a kept row from before the seen-marker column gets "-" there."""
+    n_cells = rows[0].count("|")
+    for i, r in enumerate(old_rows):
+        if r.count("|") == n_cells - 1:
+            cut = r.rstrip(" |").rfind("|")
+            old_rows[i] = r[:cut] + "| - " + r[cut:]
+    order = {c: i for i, c in enumerate(CLIPS)}
+
+    def key(row: str) -> tuple[int, int]:
+        cells = row.split("|")
+        return order.get(cells[1].split()[0], len(order)), -int(cells[2])
+
+    return sorted(summary + old_summary, key=lambda line: -int(line.split()[1])), sorted(rows + old_rows, key=key)
 
 
 def rig_text(rig: CameraRig) -> str:
@@ -200,14 +244,20 @@ def main() -> int:
                                 take.n_tpose, bounds=live["joint_bound"][:F])
             ref, ref_far, ref_sure = true_marker_reference(take.joints[:F], take.t[:F], blackout, db, take.n_tpose,
                                                  not args.one_pass)
+            # the true markers where >= 2 cameras see them (merged with another or not): what perfect
+            # names of what the cameras give would reach
+            seen = (np.stack([c.visible for c in take.cameras]).sum(axis=0) >= 2)[:F]
+            ref_seen = true_marker_reference(take.joints[:F], take.t[:F], blackout, db, take.n_tpose,
+                                             not args.one_pass, seen)[0]
             reacq = ", ".join("never" if not np.isfinite(r) else f"{r:.2f}" for r in s.reacquire_s) or "-"
             kind = next((k for k, clips in KINDS.items() if clip in clips), "unseen")
             rows.append(f"| {clip} ({kind}) | {n_cam} | {F} | {100 * s.correct:.1f} ({100 * s_live.correct:.1f}) | {s.wrong_frames} | "
                         f"{100 * s.confident_wrong:.1f} ({100 * ref_far:.1f}) | {100 * s.confident_wrong_marker:.1f} | "
                         f"{100 * s.bound_wrong:.1f} ({100 * ref_sure:.1f}) | {100 * s.unsure_joints:.1f} | {100 * s.solved:.1f} | {reacq} | "
-                        f"{s.blackout_pose_s:.2f} | {100 * s.mpjpe_m:.2f} | {100 * ref:.2f} | {ms:.1f} |")
+                        f"{s.blackout_pose_s:.2f} | {100 * s.mpjpe_m:.2f} | {100 * ref:.2f} | {100 * ref_seen:.2f} | "
+                        f"{ms:.1f} |")
             print(rows[-1], flush=True)
-            agg[(n_cam, kind)].append((s, ref, ref_far, s_live, ref_sure))
+            agg[(n_cam, kind)].append((s, ref, ref_far, s_live, ref_sure, ref_seen))
     if not rows:
         print(f"no clip has {MIN_PART_S:g} s of motion from {args.start:g} s", file=sys.stderr)
         return 1
@@ -232,6 +282,7 @@ def main() -> int:
         never = sum(1 for r in reacq if not np.isfinite(r))
         fin = [r for r in reacq if np.isfinite(r)]
         d_mpjpe = np.nanmean([it[0].mpjpe_m - it[1] for it in items])
+        d_seen = np.nanmean([it[0].mpjpe_m - it[5] for it in items])
         summary.append(
             f"- {n_cam} cameras, {len(items)} {kind} takes: **{100 * correct:.1f} %** of frames with every visible marker named "
             f"right (target >= 99 % with 4 cameras; live, labelled forwards only: {100 * correct_live:.1f} %, "
@@ -244,24 +295,26 @@ def main() -> int:
             f"the blackout: max **{max(fin) if fin else float('nan'):.2f} s**"
             f"{f', never in {never} takes' if never else ''} (target <= 0.5 s); longest pose into a blackout "
             f"{max(s.blackout_pose_s for s in sc):.2f} s (target <= 0.5 s); MPJPE **{100 * d_mpjpe:+.2f} cm** over the "
-            f"true-marker reconstruction (target <= +0.5 cm)")
+            f"true-marker reconstruction (target <= +0.5 cm; {100 * d_seen:+.2f} cm over the true markers where >= 2 "
+            f"cameras see them)")
+    title = "Marker identification (benchmarks/labelling.py)"
+    if args.start:  # another part of the clips: its own section, the default one stays
+        title += f", clips from {args.start:g} s (--start {args.start:g})"
+    if args.body_scale is not None:
+        title += f", bodies x{args.body_scale:g} (--body-scale {args.body_scale:g})"
+    if own_rig is not None:
+        title += f", rig {args.calibration.stem} (--calibration)"
+    if args.seed != SEED:  # other bodies and noise: its own section, the development seed's stays
+        title += f", seed {args.seed} (--seed {args.seed})"
+    summary, rows = merged(summary, rows, *kept_lines(title, args.cameras))
     table = ["| clip | cameras | frames | frames all right (%) (live) | frames with a wrong name | joint > 20 cm (% of confident; "
              "true markers) | marker joint > 20 cm (% of confident) | confidently wrong joint (% of confident; true "
              "markers) | joints flagged unsure (%) | solved (% outside blackout) | re-acquired after (s) | "
-             "pose into blackout (s) | MPJPE (cm) | true-marker MPJPE (cm) | ms/frame |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows]
+             "pose into blackout (s) | MPJPE (cm) | true-marker MPJPE (cm) | seen true-marker MPJPE (cm) | ms/frame |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows]
     print("\n".join(summary))
     if not args.no_record:
-        title = "Marker identification (benchmarks/labelling.py)"
-        if args.start:  # another part of the clips: its own section, the default one stays
-            title += f", clips from {args.start:g} s (--start {args.start:g})"
         size = args.body_scale
-        if size is not None:
-            title += f", bodies x{size:g} (--body-scale {size:g})"
-        if own_rig is not None:
-            title += f", rig {args.calibration.stem} (--calibration)"
-        if args.seed != SEED:  # other bodies and noise: its own section, the development seed's stays
-            title += f", seed {args.seed} (--seed {args.seed})"
         record(title,
                [f"Held-out subjects (database without the clip's subject), "
                 f"{'bodies varied' if size is None else f'bodies x{size:g} the subject (bone types varied)'}, "
