@@ -348,8 +348,7 @@ class Labeller:
         self._t_prev, self._t_frame = self._t_frame, t
         self._rescued[:] = False
         self._views = [view_blobs(p) for p in packets]
-        pred, gate = self._predict(t)
-        pts = self._pts = self.points.reconstruct(self._views, pred)
+        pts = self._pts = self.points.reconstruct(self._views)
         if len(pts) >= 2:
             self.stats.frames_with_points += 1
             sure = pts.X[pts.n_views >= 3]
@@ -357,6 +356,7 @@ class Labeller:
                 # the body's travel: the median of the points no ghost makes (the mean of all
                 # points jumped as 2-view ghosts came and went: "walking backwards" after a blackout)
                 self._centres = [c for c in self._centres if t - c[0] <= 0.5] + [(t, np.median(sure, axis=0))]
+        pred, gate = self._predict(t)
         n_pred = int(np.isfinite(pred).all(axis=1).sum())
         q = LabelQuality(n_points=len(pts))
         out = np.full((N_MARKERS, 3), np.nan)

@@ -72,7 +72,6 @@ class PointsConfig:
     ends_min_px: float = 1.0  #: a merged blob whose moments part its markers by less is used by its centroid
     rough_px: float = 0.3  #: an accepted >= 4-view point this rough is checked for a ghost (``_unghost``)
     elongated_px: float = 2.0  #: a blob of a single marker's size whose moments part two markers by this much holds two
-    expected_m: float = 0.06  #: a 2-view candidate this near an expected marker goes before others as well seen (0: never)
 
 
 @dataclass
@@ -176,16 +175,8 @@ class PointReconstructor:
         xy = self.tri.undistort_normalized(uv)
         return [xy[c, :len(v)] for c, v in enumerate(views)]
 
-    def reconstruct(self, views: list[ViewBlobs], expected: np.ndarray | None = None) -> Points3D:
-        """Points of one frame from per-view blobs (rig order; empty ViewBlobs for a missing view).
-
-        expected: (M, 3) world m, where markers are expected (the labelling's predictions; NaN
-        rows none), or None. Of the 2-view candidates that rank alike (as many unexplained
-        views), those within ``expected_m`` of an expected marker go first: two ankles at one
-        height seen by two cameras only lie on one epipolar line, and both pairings of their
-        blobs triangulate as well, the wrong one 20 cm off each ankle (a dance, both ankles
-        unnamed on 25 frames of 53 as the pairing flipped). Which name a point gets stays the
-        naming stage's: a swapped prediction favours the same points."""
+    def reconstruct(self, views: list[ViewBlobs]) -> Points3D:
+        """Points of one frame from per-view blobs (rig order; empty ViewBlobs for a missing view)."""
         cfg, C = self.config, self.C
         xy = self._normalised(views)
         hom = [np.concatenate([x, np.ones((len(x), 1))], axis=1) for x in xy]
@@ -284,7 +275,7 @@ class PointReconstructor:
             centre = np.median(np.repeat(X[sure, :2], counts[sure], axis=0), axis=0)
             far = (n_views < 3) & (np.linalg.norm(np.nan_to_num(X[:, :2]) - centre, axis=1) > cfg.body_radius_m)
         # greedy acceptance, best first
-        penalty = missing + 2 * far + 0.5 * ((n_views == 2) & ~self._expected(X, expected))
+        penalty = missing + 2 * far
         fresh = (X.copy(), err.copy(), n_views.copy(), blob.copy())  # before acceptance reduces candidates
         keep, capl = self._accept(penalty, views, ok, X, err, n_views, blob, uv)
         keep, capl, X, err, n_views, blob = self._unghost(keep, capl, penalty, views, ok, (X, err, n_views, blob),
@@ -643,8 +634,7 @@ class PointReconstructor:
     def _accept(self, penalty: np.ndarray, views: list[ViewBlobs], ok: np.ndarray, X: np.ndarray, err: np.ndarray,
                 n_views: np.ndarray, blob: np.ndarray, uv: np.ndarray) -> tuple[list[int], list[list[int]]]:
         """Greedy acceptance of the candidates, best first (more views, then a smaller
-        ``penalty`` (K,): unexplained views, and a half for a 2-view candidate no marker is
-        expected at, then a smaller error): a blob is used at most as
+        ``penalty`` (K,): unexplained views, then a smaller error): a blob is used at most as
         many times as its capacity, two accepted points are never closer than
         ``min_separation_m``. A candidate some of whose blobs are taken is kept from its other
         views when >= 2 are left, and ranked again by what is left of it (ranked by all its
@@ -673,7 +663,7 @@ class PointReconstructor:
                 if len(cs) - len(taken) < 2 or not self._reduce(k, taken, X, err, n_views, blob, uv):
                     continue
                 rows[k] = blob[:, k].tolist()
-                heapq.heappush(heap, (-int(n_views[k]), float(penalty[k]), float(err[k]), k))
+                heapq.heappush(heap, (-int(n_views[k]), int(penalty[k]), float(err[k]), k))
                 continue
             if keep and np.min(np.linalg.norm(X[keep] - X[k], axis=1)) < cfg.min_separation_m:
                 continue
@@ -710,17 +700,6 @@ class PointReconstructor:
                 keep, capl, ok = keep2, capl2, without
                 X, err, n_views, blob = trial
         return keep, capl, X, err, n_views, blob
-
-    def _expected(self, X: np.ndarray, expected: np.ndarray | None) -> np.ndarray:
-        """(K,) bool: candidates X (K, 3) within ``expected_m`` of an expected marker
-        (expected: (M, 3), NaN rows none; None: nowhere)."""
-        if expected is None or self.config.expected_m <= 0:
-            return np.zeros(len(X), bool)
-        e = expected[np.isfinite(expected).all(axis=1)]
-        if not len(e):
-            return np.zeros(len(X), bool)
-        d = np.linalg.norm(np.nan_to_num(X, nan=1e6)[:, None, :] - e[None], axis=2)
-        return d.min(axis=1) <= self.config.expected_m
 
     def _triangulate_views(self, uv: np.ndarray, k: int, cams: list[int]) -> TriangulationResult:
         """Candidate k triangulated from the views ``cams`` only (uv: (C, K, 2) px of the

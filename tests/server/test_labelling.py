@@ -317,39 +317,6 @@ def test_a_merged_blob_explains_the_view_of_a_two_view_point():
     assert got.n_views[k] == 2 and got.unexplained[k] == 1
 
 
-def test_two_markers_on_one_epipolar_line_are_paired_where_markers_are_expected():
-    """Two ankles 24 cm apart at one height, seen by two cameras only, lie on one epipolar line
-    of the pair: both pairings of their blobs triangulate as well, and which one the points stage
-    took flipped with the sensor noise (the wrong one puts both points 17 cm off). With the
-    labelling's predictions (3 cm off, as tracking gives) the pairing near them is taken in
-    every frame."""
-    rig = default_rig(4)
-    pr = PointReconstructor(rig, Triangulator(rig))
-    c0, c1 = rig.cameras[0].center, rig.cameras[1].center
-    mid = np.array([0.1, 0.2, 0.1])
-    normal = np.cross(c1 - c0, mid - c0)
-    along = np.cross(normal, [0.0, 0.0, 1.0])
-    along /= np.linalg.norm(along)
-    ankles = np.stack([mid + 0.12 * along, mid - 0.12 * along])  # in the plane of both cameras' centres
-    others = np.array([[0.0, 0.3, 1.5], [0.4, 0.3, 1.5], [-0.3, 0.0, 1.2], [0.3, 0.0, 1.2]])
-    expected = ankles + [[0.03, 0.0, 0.0], [0.0, -0.02, 0.02]]
-    rng = np.random.default_rng(0)
-    flipped = 0
-    for _ in range(20):
-        packets = []
-        for c, cam in enumerate(rig.cameras):
-            pts = np.vstack([others, ankles]) if c < 2 else others  # the other two cameras: hidden
-            uv = (cam.project(pts) + rng.normal(0, 0.1, (len(pts), 2))).astype(np.float32)
-            packets.append(MarkerPacket(cam.name, 0, 0, 160, 120, 100, np.full(len(uv), UNLABELLED, np.uint8), uv,
-                                        np.full(len(uv), 9, np.uint16), np.zeros(len(uv), np.uint8)))
-        views = [view_blobs(p) for p in packets]
-        plain = pr.reconstruct(views)
-        flipped += int(min(np.linalg.norm(plain.X - ankles[0], axis=1)) > 0.05)
-        got = pr.reconstruct(views, expected)
-        assert all(min(np.linalg.norm(got.X - a, axis=1)) < 0.02 for a in ankles)
-    assert flipped >= 3, "the test needs the two pairings to be a coin flip without predictions"
-
-
 def test_a_marker_hidden_behind_another_in_every_view_is_placed_by_reflection():
     """A wrist passing in front of its shoulder: two views see the shoulder alone (the wrist
     hidden), the other two see one merged blob of both. The point triangulated from the merged
