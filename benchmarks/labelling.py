@@ -135,7 +135,8 @@ def kept_lines(title: str, cameras: list[int]) -> tuple[list[str], list[str]]:
     return summary, rows
 
 
-def merged(summary: list[str], rows: list[str], old_summary: list[str], old_rows: list[str]) -> tuple[list[str], list[str]]:
+def merged(summary: list[str], rows: list[str], old_summary: list[str],
+           old_rows: list[str]) -> tuple[list[str], list[str]]:
     """This run's summary lines and table rows with the kept ones of other camera counts
     (:func:`kept_lines`), the lines by camera count (most first), the rows by clip as CLIPS
     lists them and camera count; a kept row from before the seen-marker column gets "-" there."""

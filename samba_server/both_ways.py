@@ -32,9 +32,9 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   frames before a rule renamed the ankles; fresh seeds, 4 cameras: 1325 -> 1299 frames not
   all right, no take worse on any saved set). The names a pass corrects were wrong for a
   while before the correction; a rename the backward pass does not confirm may itself be the
-  mistake. Where a kept forward name and
-  a taken backward one fall on one point, neither stands (the two passes dispute it); a mix
-  that would still name one point twice keeps the forward names;
+  mistake. Where a kept forward name and a taken backward one fall on one point, neither
+  stands (the two passes dispute it); a mix that would still name one point twice keeps the
+  forward names;
 - where a forward rename gave a marker another point while the backward pass, not doubting
   it, names it at the point both passes named it through the ``AGREED_S`` before, the
   backward name holds from the rename until the two name it alike again: the forward pass's
@@ -591,7 +591,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     renamed = fwd.renamed.astype(np.int64)
     whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
     confirmed = np.where(whole & (renamed != 0), _halves(renamed), renamed & agree)
-    doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True) | _apart_before(confirmed, same, t, own=renamed)
+    doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True) \
+        | _apart_before(confirmed, same, t, own=renamed)
     # and the other way round: a backward rename counts where the forward pass names those
     # markers at the same points (tracking them, not renaming them)
     agree_b = alike & ~renamed
