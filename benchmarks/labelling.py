@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _record import DOC, record  # noqa: E402
+from _record import record, recorded  # noqa: E402
 
 from samba_common.calib import CameraRig, default_rig  # noqa: E402
 from samba_common.skeleton import MARKER_JOINT  # noqa: E402
@@ -120,12 +120,9 @@ def true_marker_reference(truth: np.ndarray, t: np.ndarray, blackout: np.ndarray
 def kept_lines(title: str, cameras: list[int]) -> tuple[list[str], list[str]]:
     """The summary lines and table rows of the recorded section ``title`` in docs/BENCHMARKS.md
     for the camera counts not in cameras (a run of some counts keeps the others' figures)."""
-    text = DOC.read_text() if DOC.exists() else ""
-    m = re.search(rf"^## {re.escape(title)}\n(.*?)(?=^## |\Z)", text, re.S | re.M)
-    if m is None:
-        return [], []
+    section = recorded(title)
     summary, rows = [], []
-    for line in m.group(1).splitlines():
+    for line in (section or "").splitlines():
         head = re.match(r"- (\d+) cameras, ", line)
         cell = re.match(r"\| [^|]+ \| (\d+) \| ", line)
         if head and int(head.group(1)) not in cameras:
@@ -234,7 +231,8 @@ def main() -> int:
                 est, tt, extra = process_videos(server, videos, cfg.fps, None, both_ways=not args.one_pass)
                 ms = 1e3 * (time.perf_counter() - t0) / len(tt)
             F = min(len(tt), len(take.t))
-            vis = separable_visible(np.stack([c.uv for c in take.cameras]), np.stack([c.visible for c in take.cameras]),
+            visible = np.stack([c.visible for c in take.cameras])  # (C, F, 8)
+            vis = separable_visible(np.stack([c.uv for c in take.cameras]), visible,
                                     np.stack([c.radius for c in take.cameras]))[:F]
             blackout = take.blackout[:F] if take.blackout is not None else np.zeros(F, bool)
             s = score_take(extra["markers"][:F], est[:F], take.joints[:F], vis, blackout, cfg.fps, take.n_tpose,
@@ -247,7 +245,7 @@ def main() -> int:
                                                  not args.one_pass)
             # the true markers where >= 2 cameras see them (merged with another or not): what perfect
             # names of what the cameras give would reach
-            seen = (np.stack([c.visible for c in take.cameras]).sum(axis=0) >= 2)[:F]
+            seen = (visible.sum(axis=0) >= 2)[:F]
             ref_seen = true_marker_reference(take.joints[:F], take.t[:F], blackout, db, take.n_tpose,
                                              not args.one_pass, seen)[0]
             reacq = ", ".join("never" if not np.isfinite(r) else f"{r:.2f}" for r in s.reacquire_s) or "-"

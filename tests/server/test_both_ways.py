@@ -11,8 +11,8 @@ from samba_common.calib import default_rig
 from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
-from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, JOIN_S, NEXT_S, PassResult, backward_pass, choose,
-                                    end_facing, loose_of, relabel_both_ways)
+from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, JOIN_S, NEXT_S, PassResult, backward_pass,
+                                    choose, end_facing, loose_of, relabel_both_ways)
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from samba_server.recon.bounds import CONFIDENT_M
 from samba_server.recon.reconstruct import Reconstructor, solve_frames
