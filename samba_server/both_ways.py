@@ -133,7 +133,7 @@ from samba_common.skeleton import N_MARKERS
 from .labelling import bit_markers, marker_bits
 from .labelling.labeller import facing_of
 from .labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
-from .recon.bounds import widened
+from .recon.bounds import mirrored_legs, widened
 from .recon.reconstruct import solve_both_ways
 from .server import Server, ServerConfig
 
@@ -143,7 +143,8 @@ log = logging.getLogger(__name__)
 _UPPER = (1 << LS) | (1 << RS) | (1 << LW) | (1 << RW)
 _LEGS = (1 << LK) | (1 << RK) | (1 << LA) | (1 << RA)
 
-__all__ = ["PassResult", "backward_pass", "choose", "disputed_m", "end_facing", "loose_of", "relabel_both_ways"]
+__all__ = ["PassResult", "backward_pass", "choose", "disputed_m", "end_facing", "legs_unsure_of", "loose_of",
+           "relabel_both_ways"]
 
 #: m (LabelQuality.margin_m, 0.1 m per identification score unit): an identification whose
 #: best labelling beat the runner-up by less than this was a coin flip (after a blackout the
@@ -185,6 +186,8 @@ FIT_RATIO = 2.0
 #: ... and by this much (m^2, summed over the stretch's frames and markers: 0.003 is 30
 #: marker-frames left unnamed)
 FIT_GAIN_M2 = 0.003
+#: m: a pass names a leg marker as chosen when its marker is this near the chosen one
+ALIKE_M = 0.03
 
 
 @dataclass
@@ -196,7 +199,8 @@ class PassResult:
     named the frame, NaN on the frames tracking named (None: no identification known); loose:
     (F, 8) bool, the named markers whose position is rough (:meth:`Labeller.loose`; None: none);
     residual: (F,) m, the pass's own solve of its names (rms marker fit; NaN unsolved; None:
-    not known)."""
+    not known); legs_unsure: (F,) bool, frames whose leg names may be each other's
+    (:attr:`Labeller.legs_unsure`; None: not known)."""
 
     markers: np.ndarray
     renamed: np.ndarray
@@ -204,6 +208,7 @@ class PassResult:
     identified: np.ndarray | None = None
     loose: np.ndarray | None = None
     residual: np.ndarray | None = None
+    legs_unsure: np.ndarray | None = None
 
 
 def _standard_pose_clear(identified: np.ndarray | None) -> np.ndarray | None:
@@ -260,7 +265,7 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
                   tri_config=server.triangulator.config, label_config=label_config)
     F = len(t)
     out = PassResult(np.full((F, N_MARKERS, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan),
-                     np.full(F, np.nan), np.zeros((F, N_MARKERS), bool), np.full(F, np.nan))
+                     np.full(F, np.nan), np.zeros((F, N_MARKERS), bool), np.full(F, np.nan), np.zeros(F, bool))
     t_end = float(t[-1]) if F else 0.0
     for k in range(F - 1, -1, -1):
         tb = t_end - float(t[k])  # backwards time runs forwards
@@ -268,6 +273,7 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
         markers, _joints, out.residual[k], _bounds = twin.solve_markers(markers, tb)
         out.markers[k], out.margin[k], out.renamed[k] = markers, q.margin_m, q.renamed
         out.loose[k] = twin.labeller.loose(markers)
+        out.legs_unsure[k] = twin.labeller.legs_unsure
         if q.mode == "identified":
             out.identified[k] = q.margin_m
         if progress is not None:
@@ -685,8 +691,35 @@ def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: P
     extra = {"markers": markers, "residual": np.array([r.residual for r in results], float),
              "n_markers": np.isfinite(markers).all(axis=2).sum(axis=1),
              "label_margin": np.where(take_b, bwd.margin, fwd.margin), "from_backward": take_b,
-             "joint_bound": widened(bounds, disputed_m(fwd, bwd))}
+             "legs_unsure": legs_unsure_of(markers, fwd, bwd)}
+    extra["joint_bound"] = mirrored_legs(widened(bounds, disputed_m(fwd, bwd)), joints, extra["legs_unsure"])
     return joints, extra
+
+
+def legs_unsure_of(markers: np.ndarray, fwd: PassResult, bwd: PassResult) -> np.ndarray:
+    """(F,) bool: the frames whose chosen leg names markers (F, 8, 3) may be each other's. A
+    pass that names the legs as chosen (each within ``ALIKE_M``: two markers on one merged
+    point are placed beside it a little differently by each pass) and is sure of them (:attr:`PassResult.legs_unsure`:
+    it has tracked them from knees named clearly apart, before the frame in its direction of
+    travel) makes them sure; else they are unsure when a pass that names them so, or, the
+    choice mixing the passes' names, either pass, is unsure."""
+    F = len(markers)
+    legs = [LK, RK, LA, RA]
+    named = np.isfinite(markers[:, legs]).all(axis=2)
+    sure = np.zeros(F, bool)
+    unsure_same = np.zeros(F, bool)
+    unsure_any = np.zeros(F, bool)
+    matched = np.zeros(F, bool)
+    for p in (fwd, bwd):
+        if p.legs_unsure is None:
+            continue
+        flag = p.legs_unsure[:F].astype(bool)
+        same = ((_within(markers[:, legs], p.markers[:F, legs], ALIKE_M) == named).all(axis=1)) & named.any(axis=1)
+        sure |= same & ~flag
+        unsure_same |= same & flag
+        unsure_any |= flag
+        matched |= same
+    return ~sure & np.where(matched, unsure_same, unsure_any) & named.any(axis=1)
 
 
 def disputed_m(fwd: PassResult, bwd: PassResult) -> np.ndarray:

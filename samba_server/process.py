@@ -73,9 +73,11 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     poses.
 
     Returns joints (F, 13, 3), t (F,) seconds (F = the longest camera, at least ``n_frames``),
-    and extras: markers (F, 8, 3), residual (F,), n_markers (F,), label_margin (F,) metres;
-    with both_ways also from_backward (F,) bool and live: the forward pass's joints and
-    markers (a dict).
+    and extras: markers (F, 8, 3), residual (F,), n_markers (F,), label_margin (F,) metres,
+    joint_bound (F, 13) m, legs_unsure (F,) bool (the legs' names may be each other's:
+    :attr:`~samba_server.labelling.Labeller.legs_unsure`; the knees' and ankles' bounds cover
+    it); with both_ways also from_backward (F,) bool and live: the forward pass's joints,
+    markers and bounds (a dict).
     """
     from samba_common.wire import encode_packet
     from samba_mote.pipeline import MotePipeline
@@ -96,13 +98,13 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     rig_index = [server.rig.names.index(n) for n in names]
     kept: list[list] = []  # per frame, per rig camera: the packet (both_ways)
     # pose seq -> the markers its labelling renamed, its identification's margin (NaN: tracked),
-    # and its markers whose position is rough
-    labelled_by_seq: dict[int, tuple[int, float, np.ndarray]] = {}
+    # its markers whose position is rough, and whether its legs' names may be each other's
+    labelled_by_seq: dict[int, tuple[int, float, np.ndarray, bool]] = {}
 
     def note_renamed(msg) -> None:  # runs right after its frame was labelled: the last quality is that frame's
         q = server.labeller.last_quality
         labelled_by_seq[msg.seq] = (q.renamed, q.margin_m if q.mode == "identified" else float("nan"),
-                                    server.labeller.loose(np.asarray(msg.markers, float)))
+                                    server.labeller.loose(np.asarray(msg.markers, float)), server.labeller.legs_unsure)
 
     if both_ways:
         server.pose_listeners.append(note_renamed)
@@ -144,6 +146,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     renamed = np.zeros(n_frames, np.int64)
     identified = np.full(n_frames, np.nan)
     loose = np.zeros((n_frames, 8), bool)
+    legs_unsure = np.zeros(n_frames, bool)
     t_live = np.arange(n_frames) / fps  # the server's own frame times (s since its first frame)
     t0_ns = server.poses[0].t_ns if server.poses else base
     for p in server.poses:
@@ -153,17 +156,18 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
             margin[k] = p.label_margin_m
             if p.joint_bound is not None:
                 bound[k] = p.joint_bound
-            renamed[k], identified[k], loose[k] = labelled_by_seq.get(p.seq, (0, np.nan, loose[k]))
+            renamed[k], identified[k], loose[k], legs_unsure[k] = labelled_by_seq.get(p.seq, (0, np.nan, loose[k], False))
             t_live[k] = (p.t_ns - t0_ns) / 1e9
     t = np.arange(n_frames) / fps
     extra = {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin,
-             "joint_bound": bound}
+             "joint_bound": bound, "legs_unsure": legs_unsure}
     if both_ways:
         from .both_ways import PassResult, relabel_both_ways
 
         kept += [[None] * len(server.rig.names) for _ in range(n_frames - len(kept))]
         again = relabel_both_ways(server, kept[:n_frames], t_live,
-                                  PassResult(markers, renamed, margin, identified, loose, residual), progress)
+                                  PassResult(markers, renamed, margin, identified, loose, residual, legs_unsure),
+                                  progress)
         if again is not None:
             live = {"joints": joints, "markers": markers, "joint_bound": bound}
             joints, extra = again

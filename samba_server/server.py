@@ -30,6 +30,7 @@ from samba_common.wire import PacketError, decode_packet
 
 from .record import Recorder
 from .labelling import LabelConfig, Labeller, LabelQuality, marker_bits
+from .recon.bounds import mirrored_legs
 from .sync import FrameSync, SyncConfig, SyncPacket
 from .triangulate import TriangulateConfig, Triangulator
 
@@ -291,7 +292,9 @@ class Server:
         """Solve the named markers (8, 3) of the frame at t s: ((8, 3) markers, (13, 3) joints,
         NaN if unsolved; residual m; (13,) joint bounds m, inf if unsolved). Names the solver
         cannot fit go back to the labelling (:meth:`Labeller.refit`), which may swap them: the
-        frame is then solved again with the new names, which are returned. A solved pose feeds
+        frame is then solved again with the new names, which are returned. Legs the labelling
+        is unsure of (:attr:`Labeller.legs_unsure`: they may be each other's) widen the
+        knees' and ankles' bounds (:func:`~samba_server.recon.bounds.mirrored_legs`). A solved pose feeds
         the labelling's predictions; a solver error is logged and leaves the frame unsolved."""
         joints, residual = np.full((N_JOINTS, 3), np.nan), float("nan")
         bounds = np.full(N_JOINTS, np.inf)
@@ -308,7 +311,7 @@ class Server:
                     r = rec.solve(markers, t)
             joints = np.asarray(r.joints, float)
             residual = float(r.residual)
-            bounds = np.asarray(r.bounds, float)
+            bounds = mirrored_legs(r.bounds, joints, self.labeller.legs_unsure)
         except Exception:
             log.exception("solver failed on frame t=%.3f s (frame left unsolved)", t)
         if np.isfinite(joints).all():

@@ -98,7 +98,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"marker placement: {note}", file=sys.stderr)
     for line in activity.notes():
         log.info(line)
-    for line in activity.warnings() + unnamed_warnings(extra["markers"], joints):
+    for line in activity.warnings() + unnamed_warnings(extra["markers"], joints) \
+            + legs_warnings(extra.get("legs_unsure"), joints, t):
         print(f"samba-process: WARNING: {line}", file=sys.stderr)
     if solved < 0.5 * len(t):
         print(f"samba-process: WARNING: only {solved} of {len(t)} frames solved: {server.failure_reason()}",
@@ -128,6 +129,31 @@ def unnamed_warnings(markers: np.ndarray, joints: np.ndarray, share: float = UNN
         out.append(f"{side} {part} unnamed in {k} of {n} frames with a pose ({100 * k / n:.0f} %): the {side} "
                    f"{limb} there is the solver's guess (n_markers in the output counts the named markers)")
     return out
+
+
+#: legs unsure of their side for at least this long (s, summed) are reported
+LEGS_UNSURE_WARN_S = 0.5
+
+
+def legs_warnings(unsure: np.ndarray | None, joints: np.ndarray, t: np.ndarray,
+                  min_s: float = LEGS_UNSURE_WARN_S) -> list[str]:
+    """One line when the legs' left and right were unsure (unsure (F,) bool, the output's
+    ``legs_unsure``) in frames with a pose (joints (F, 13, 3)) for at least min_s s in all (t
+    (F,) s): the knees and ankles there may be the other side's, and their bounds say so."""
+    if unsure is None or len(t) < 2:
+        return []
+    solved = np.isfinite(joints).all(axis=(1, 2))
+    hit = np.asarray(unsure, bool) & solved
+    dt = float(np.median(np.diff(t)))
+    if hit.sum() * dt < min_s:
+        return []
+    edges = np.flatnonzero(np.diff(np.r_[0, hit.astype(int), 0]))
+    a, b = max(zip(edges[::2], edges[1::2]), key=lambda ab: ab[1] - ab[0])
+    return [f"left and right legs unsure in {int(hit.sum())} of {int(solved.sum())} frames with a pose "
+            f"(longest {t[a]:.2f}-{t[b - 1]:.2f} s): the legs were named afresh (after a blackout or a loss) "
+            f"and their knees not seen apart since, so the markers cannot tell which leg is which (legs one "
+            f"behind the other, or knees in one blob); the knees and ankles there may be the other side's "
+            f"(joint_bound says how far; legs_unsure in the output marks the frames)"]
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -81,6 +81,7 @@ class LabelConfig:
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
     crossed_memory_s: float = 2.0  #: a pair named crossed this little before the names were lost may be crossed again
     knees_crossed_s: float = 1.0  #: knees crossed (by crossed_m) this long are the legs' names swapped (inf: never)
+    legs_sure_m: float = 0.08  #: legs named afresh are unsure (:attr:`Labeller.legs_unsure`) until the knees are named this far apart along the subject's right, the left one on the left (inf: always unsure)
     arm_swap_s: float = 0.05  #: a shoulder off the shoulder width whose own wrist's point fits it this long swaps with that wrist (inf: never)
     reach_swap_m: float = 0.02  #: the wrists swap names when one is this far beyond its arm's reach from its shoulder ... (inf: never)
     reach_fit_m: float = 0.03  #: ... and swapped both are this far within it
@@ -209,6 +210,7 @@ class Labeller:
         self._views: list = []  # this frame's blobs per camera (ViewBlobs)
         self._pts: Points3D | None = None  # this frame's 3D points
         self._knees_crossed_since: float | None = None
+        self._legs_unsure = False  # the legs' names may be each other's (legs_unsure)
         self._cross_since: float | None = None  # since when the shins fit clearly better crossed
         self._cross_seen = -np.inf  # when the crossed-feet check could last be made
         self._arm_swap_since: list[float | None] = [None, None]  # per side: since when its wrist fits the shoulder better
@@ -298,6 +300,7 @@ class Labeller:
         self._reset_timers()
         self._free_hist = []
         self._on_point[:] = -np.inf
+        self._legs_unsure = False
 
     def _reset_timers(self) -> None:
         """Forget what the swap rules saw held over time: it was about the names before."""
@@ -333,15 +336,66 @@ class Labeller:
         named = np.isfinite(markers).all(axis=1)
         out = named.copy()
         pts = self._pts
-        if pts is None or not len(pts) or not named.any():
+        p, on = self._points_of(markers)
+        if not on.any():
             return out
-        d = np.linalg.norm(np.asarray(markers, float)[:, None, :] - pts.X[None], axis=2)  # (8, P)
-        p = np.argmin(np.where(np.isfinite(d), d, np.inf), axis=1)
-        on = named & (d[np.arange(N_MARKERS), p] <= 1e-6)
         rough = (pts.n_views - pts.n_merged < 2) | pts.mirrored | pts.merged_all  # (P,)
         twice = np.bincount(p[on], minlength=len(pts)) > 1  # (P,) points two names share
         out[on] = (rough | twice)[p[on]]
         return out
+
+    def _points_of(self, markers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(8,) this frame's point nearest each marker of markers (8, 3) m, and (8,) bool: the
+        marker is named on that point."""
+        pts = self._pts
+        if pts is None or not len(pts):
+            return np.zeros(N_MARKERS, np.int64), np.zeros(N_MARKERS, bool)
+        d = np.linalg.norm(np.asarray(markers, float)[:, None, :] - pts.X[None], axis=2)  # (8, P)
+        p = np.argmin(np.where(np.isfinite(d), d, np.inf), axis=1)
+        return p, np.isfinite(markers).all(axis=1) & (d[np.arange(N_MARKERS), p] <= 1e-6)
+
+    @property
+    def legs_unsure(self) -> bool:
+        """Whether the last frame's leg names may be each other's, left for right. Legs named
+        afresh (by an identification, or from the skeleton's prediction with no leg marker
+        tracked) are unsure until the knees are named on points of their own (not on a merged
+        point's midpoint) at least ``legs_sure_m`` apart along the subject's right, the left one on
+        the left; tracked since, the names are then sure (their mirror image would have the
+        thighs crossed, which the CMU clips do by 6 cm in 0.5 % of frames). Feet one behind the
+        other under the hips (a lunge, a dancer's fourth position) fit both namings equally
+        well: the markers say nothing of which leg is which, and a re-identification there
+        names them by a coin flip that tracking then keeps (a dance after a blackout had both
+        legs' joints 37-63 cm off for the whole last second, its bounds 2 cm). The server
+        raises the knees' and ankles' bounds to the distance between the two sides while this
+        holds (:func:`samba_server.recon.bounds.mirrored_legs`)."""
+        return self._legs_unsure
+
+    def _legs_fresh(self, out: np.ndarray, named: np.ndarray, t: float, reset: bool) -> bool:
+        """Whether this frame names a leg marker that no leg track carries on: no leg marker was
+        named within ``track_timeout`` (the names come from the skeleton's prediction), or the
+        names were reset (an identification) other than where every named leg's track was."""
+        on = _LEG_MARKERS[named[_LEG_MARKERS]]
+        if not on.size:
+            return False
+        recent = t - self._seen[on] <= self.config.track_timeout
+        if not recent.any():
+            return True
+        if not reset:
+            return False
+        near = np.linalg.norm(np.nan_to_num(out[on] - self._pos[on], nan=1.0), axis=1) <= self.config.gate_m
+        return not (recent & near).all()
+
+    def _legs_confirmed(self, out: np.ndarray, t: float) -> bool:
+        """The knees of out (8, 3) named on two points at least ``legs_sure_m`` apart along the
+        subject's right, the left one on the left. Not on a point (two markers placed either
+        side of a merged point, along the subject's right: that proves nothing), nor on a point
+        seen only in blobs twice a marker's size (it may lie between the two knees)."""
+        if self._facing is None or t - self._t_facing > 0.5:
+            return False
+        p, on = self._points_of(out)
+        if not on[[LK, RK]].all() or p[LK] == p[RK] or self._pts.merged_all[p[[LK, RK]]].any():
+            return False
+        return float((out[RK] - out[LK]) @ right_of(self._facing)) >= self.config.legs_sure_m
 
     def _label(self, packets: list, t: float) -> tuple[np.ndarray, LabelQuality]:
         self.stats.frames += 1
@@ -1358,6 +1412,7 @@ class Labeller:
         """Move the tracks to the named markers out (8, 3); shared (8,) bool: markers placed
         either side of a merged point, whose positions are partly a guess."""
         named = np.isfinite(out).all(axis=1)
+        fresh = self._legs_fresh(out, named, t, reset)
         if reset:
             self._reset_timers()
             self._t_identified = t
@@ -1386,6 +1441,7 @@ class Labeller:
             f = facing_of(out[LS], out[RS])
             if f is not None:
                 self._facing, self._t_facing = f, t
+        self._legs_unsure = (self._legs_unsure or fresh) and not self._legs_confirmed(out, t)
 
 
 def _held_since(since: float | None, holds: bool, t: float) -> float | None:
@@ -1462,6 +1518,9 @@ _UPPER = (LS, RS, LW, RW)
 
 #: per side: (its shoulder, its wrist, the other shoulder)
 _ARMS = ((LS, LW, RS), (RS, RW, LS))
+
+#: the knees and ankles
+_LEG_MARKERS = np.array([LK, RK, LA, RA])
 
 
 def marker_bits(named: np.ndarray) -> int | np.ndarray:

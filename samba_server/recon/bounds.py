@@ -53,6 +53,7 @@ _ARMS = ((_J["left_elbow"], _J["left_shoulder"], _J["left_wrist"]),
          (_J["right_elbow"], _J["right_shoulder"], _J["right_wrist"]))
 _SHOULDERS = [_J["left_shoulder"], _J["right_shoulder"]]
 _KNEES = [_J["left_knee"], _J["right_knee"]]
+_ANKLES = [_J["left_ankle"], _J["right_ankle"]]
 _HIPS = [_J["left_hip"], _J["right_hip"]]
 _HEAD = _J["head"]
 _UPPER_ARM, _FOREARM = BONE_TYPES.index("upper_arm"), BONE_TYPES.index("forearm")  # into the lengths (8,)
@@ -98,6 +99,22 @@ def widened(bounds: np.ndarray, at_markers: np.ndarray) -> np.ndarray:
     for hip, knee in zip(_HIPS, _KNEES):
         out[..., hip] = np.maximum(out[..., hip], np.maximum(shoulders, out[..., knee]))
     out[..., _HEAD] = np.maximum(out[..., _HEAD], shoulders)
+    return out
+
+
+def mirrored_legs(bounds: np.ndarray, joints: np.ndarray, unsure: np.ndarray | bool) -> np.ndarray:
+    """Bounds (..., 13) m with, where unsure (...) bool (the legs' names may be each other's:
+    :attr:`samba_server.labelling.Labeller.legs_unsure`), each knee's and ankle's raised to
+    its distance from the other side's, joints (..., 13, 3) m: named the other way round, the
+    joint would be there. The hips stay (mirrored legs move them by a few cm). A new array."""
+    out = np.array(bounds, float)
+    unsure = np.asarray(unsure, bool)
+    for left, right in (_KNEES, _ANKLES):
+        apart = np.linalg.norm(np.asarray(joints, float)[..., left, :] - np.asarray(joints, float)[..., right, :],
+                               axis=-1)
+        apart = np.where(unsure & np.isfinite(apart), apart, 0.0)
+        for j in (left, right):
+            out[..., j] = np.maximum(out[..., j], apart)
     return out
 
 

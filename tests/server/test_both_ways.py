@@ -12,7 +12,7 @@ from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
 from samba_server.both_ways import (AGREED_S, APART_S, COURSE_M, COURSE_S, JOIN_S, NEXT_S, PassResult, backward_pass,
-                                    choose, end_facing, loose_of, relabel_both_ways)
+                                    choose, end_facing, legs_unsure_of, loose_of, relabel_both_ways)
 from samba_server.labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
 from samba_server.recon.bounds import CONFIDENT_M
 from samba_server.recon.reconstruct import Reconstructor, solve_frames
@@ -666,3 +666,24 @@ def test_the_final_solve_weighs_each_chosen_marker_as_the_pass_that_named_it_sai
     assert not got[:, RK].any()  # both passes name it there: the forward pass's word
     assert not got[2, LA]
     assert loose_of(chosen, PassResult(a, fwd.renamed, fwd.margin), PassResult(b, bwd.renamed, bwd.margin)) is None
+
+
+def test_legs_one_pass_is_sure_of_are_sure_where_the_other_names_them_alike():
+    """The forward pass re-identified the legs after a blackout in a lunge (unsure); the
+    backward pass tracked them from the take's end, where the knees stood apart (sure). Where
+    both name the legs alike, the backward pass's track vouches for the names; where they name
+    them differently the chosen pass's doubt stands; unnamed legs are never unsure."""
+    rng = np.random.default_rng(2)
+    F = 4
+    a = rng.normal(0.0, 1.0, (F, 8, 3))
+    b = a.copy()
+    b[1, [LK, RK, LA, RA]] = a[1, [RK, LK, RA, LA]]  # frame 1: the backward pass named the legs mirrored
+    fwd = PassResult(a, np.zeros(F, np.int64), np.zeros(F), legs_unsure=np.ones(F, bool))
+    bwd = PassResult(b, np.zeros(F, np.int64), np.zeros(F), legs_unsure=np.array([False, False, True, True]))
+    chosen = a.copy()
+    chosen[3, [LK, RK, LA, RA]] = np.nan
+    got = legs_unsure_of(chosen, fwd, bwd)
+    assert list(got) == [False, True, True, False]
+    chosen[1] = b[1]  # the backward pass's names chosen there: its word
+    assert not legs_unsure_of(chosen, fwd, bwd)[1]
+    assert not legs_unsure_of(chosen, PassResult(a, fwd.renamed, fwd.margin), PassResult(b, bwd.renamed, bwd.margin)).any()

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from samba_common.calib import default_rig
-from samba_common.skeleton import MARKER_JOINT
+from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT
 from samba_common.wire import FLAG_TRACKED, UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
 from samba_mote.sim.tpose import stance_offset, tpose
@@ -874,6 +874,55 @@ def test_legs_named_with_the_knees_crossed_for_a_second_are_swapped_back(rule):
         assert right[int(70 + 1.1 * FPS):].all()
     else:
         assert not right[int(70 + 1.1 * FPS):].any()
+
+
+def _lunge() -> np.ndarray:
+    """Markers (8, 3) of the hip-width standard pose with the legs one behind the other under
+    the hips (a lunge, a dancer's fourth position): both knees and both ankles on the body's
+    midline (x), the left leg forward (+y, the facing), the right one back, shins kept."""
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)].copy()
+    shin = float(np.linalg.norm(pose[LK] - pose[LA]))
+    mid = 0.5 * (pose[LK, 0] + pose[RK, 0])
+    for k, a, dy, ay in ((LK, LA, 0.2, 0.1), (RK, RA, -0.2, -0.15)):
+        pose[k, :2] = [mid, pose[k, 1] + dy]
+        pose[k, 2] -= 0.05
+        pose[a, :2] = [mid, pose[k, 1] + ay]
+        pose[a, 2] = pose[k, 2] - np.sqrt(shin ** 2 - ay ** 2)
+    return pose
+
+
+def test_legs_named_afresh_one_behind_the_other_are_unsure_until_the_knees_part():
+    """The markers cannot tell which of two legs one behind the other under the hips is the
+    left one: named afresh there (after a blackout), the names are a coin flip, and tracking
+    would keep a wrong one with 2 cm bounds (a dance: both legs' joints 37-63 cm off for a
+    second). Named by tracking from the standard pose, they stay sure through the same
+    lunge; re-identified in it, they are unsure and the server widens the knees' and ankles'
+    bounds to the two sides' distance; the knees seen apart again make them sure."""
+    from samba_server.recon.bounds import CONFIDENT_M
+    from samba_server.recon.reconstruct import Reconstructor
+    from samba_server.server import Server, ServerConfig
+
+    rig = default_rig(4)
+    stand = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    lunge = _lunge()
+    n = 260
+    truth = _blend(stand, lunge, n, 20, 30)  # 50..: the lunge
+    truth[200:] = _blend(lunge, stand, n - 200, 20, 20)  # 220..240: back to standing
+    shown = truth.copy()
+    shown[80:140] = np.nan  # a 1 s blackout in the lunge
+    server = Server(rig, None, Reconstructor(lengths=DEFAULT_LENGTHS), ServerConfig(max_lag_ms=0.0))
+    rng = np.random.default_rng(3)
+    unsure = np.zeros(n, bool)
+    knee_bound = np.full(n, np.nan)
+    for k in range(n):
+        markers, _mask, _q = server.label_packets(_packets(rig, shown[k], k / FPS, rng), k / FPS)
+        _m, joints, _r, bounds = server.solve_markers(markers, k / FPS)
+        unsure[k] = server.labeller.legs_unsure
+        knee_bound[k] = bounds[JOINT_NAMES.index("left_knee")]
+    assert not unsure[5:80].any()  # the standard pose's knees are apart; tracked into the lunge
+    assert unsure[150:220].all()  # re-identified in the lunge: no telling the legs apart
+    assert (knee_bound[150:220] >= 0.35).all()  # the knees are 40 cm apart
+    assert not unsure[240:].any() and (knee_bound[240:] < CONFIDENT_M).all()
 
 
 @pytest.mark.parametrize("rule", [True, False])

@@ -12,7 +12,7 @@ from samba_common.calib import default_rig
 from samba_common.formats import load_joints
 from samba_common.skeleton import MARKER_JOINT
 from samba_mote.sim.render import render_take
-from samba_server.cli.process import main, unnamed_warnings
+from samba_server.cli.process import legs_warnings, main, unnamed_warnings
 from samba_server.cli.replay import main as replay_main
 from samba_server.recon import reconstruct_take
 from samba_server.record import TakeReader
@@ -121,3 +121,21 @@ def test_a_limb_the_solver_guessed_in_many_frames_is_reported():
     markers[:30, 7] = np.nan  # and the right ankle in 30
     assert [w.split(" unnamed")[0] for w in unnamed_warnings(markers, joints)] == ["left wrist", "right ankle"]
     assert "right leg" in unnamed_warnings(markers, joints)[1]
+
+
+def test_legs_unsure_of_their_side_for_half_a_second_are_reported():
+    """Legs whose left and right were unsure (legs_unsure) in frames with a pose for 0.5 s or
+    more get one warning with the longest stretch; a shorter doubt, or one only in frames
+    without a pose, is not reported."""
+    F, fps = 300, 60.0
+    t = np.arange(F) / fps
+    joints = np.zeros((F, 13, 3))
+    joints[100:160] = np.nan  # a blackout
+    unsure = np.zeros(F, bool)
+    unsure[100:160] = True  # unsure only where there is no pose
+    unsure[170:190] = True  # and for a third of a second
+    assert legs_warnings(unsure, joints, t) == []
+    unsure[240:270] = True  # and half a second more
+    (line,) = legs_warnings(unsure, joints, t)
+    assert line.startswith("left and right legs unsure in 50 of 240 frames with a pose (longest 4.00-4.48 s)")
+    assert legs_warnings(None, joints, t) == []
