@@ -305,13 +305,13 @@ def main() -> int:
         title += f", rig {args.calibration.stem} (--calibration)"
     if args.seed != SEED:  # other bodies and noise: its own section, the development seed's stays
         title += f", seed {args.seed} (--seed {args.seed})"
+    print("\n".join(summary))  # this run's lines; the record also keeps the other camera counts'
     summary, rows = merged(summary, rows, *kept_lines(title, args.cameras))
     table = ["| clip | cameras | frames | frames all right (%) (live) | frames with a wrong name | joint > 20 cm (% of confident; "
              "true markers) | marker joint > 20 cm (% of confident) | confidently wrong joint (% of confident; true "
              "markers) | joints flagged unsure (%) | solved (% outside blackout) | re-acquired after (s) | "
              "pose into blackout (s) | MPJPE (cm) | true-marker MPJPE (cm) | seen true-marker MPJPE (cm) | ms/frame |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|", *rows]
-    print("\n".join(summary))
     if not args.no_record:
         size = args.body_scale
         record(title,
