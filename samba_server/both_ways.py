@@ -699,10 +699,10 @@ def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: P
 def legs_unsure_of(markers: np.ndarray, fwd: PassResult, bwd: PassResult) -> np.ndarray:
     """(F,) bool: the frames whose chosen leg names markers (F, 8, 3) may be each other's. A
     pass that names the legs as chosen (each within ``ALIKE_M``: two markers on one merged
-    point are placed beside it a little differently by each pass) and is sure of them (:attr:`PassResult.legs_unsure`:
-    it has tracked them from knees named clearly apart, before the frame in its direction of
-    travel) makes them sure; else they are unsure when a pass that names them so, or, the
-    choice mixing the passes' names, either pass, is unsure."""
+    point are placed beside it a little differently by each pass) and is sure of them
+    (``PassResult.legs_unsure``: it has tracked them from knees named clearly apart, earlier in
+    its direction of travel) makes them sure; else they are unsure when a pass that names them
+    so, or, the choice mixing the passes' names, either pass, is unsure."""
     F = len(markers)
     legs = [LK, RK, LA, RA]
     named = np.isfinite(markers[:, legs]).all(axis=2)

@@ -109,9 +109,9 @@ def mirrored_legs(bounds: np.ndarray, joints: np.ndarray, unsure: np.ndarray | b
     joint would be there. The hips stay (mirrored legs move them by a few cm). A new array."""
     out = np.array(bounds, float)
     unsure = np.asarray(unsure, bool)
+    joints = np.asarray(joints, float)
     for left, right in (_KNEES, _ANKLES):
-        apart = np.linalg.norm(np.asarray(joints, float)[..., left, :] - np.asarray(joints, float)[..., right, :],
-                               axis=-1)
+        apart = np.linalg.norm(joints[..., left, :] - joints[..., right, :], axis=-1)
         apart = np.where(unsure & np.isfinite(apart), apart, 0.0)
         for j in (left, right):
             out[..., j] = np.maximum(out[..., j], apart)

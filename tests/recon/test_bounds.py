@@ -9,7 +9,7 @@ import pytest
 from samba_common.body import prepend_standard_pose
 from samba_common.bvh import load_bvh, resample
 from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT
-from samba_server.recon.bounds import CONFIDENT_M, UNSEEN_SPEED, swivel_radius, widened
+from samba_server.recon.bounds import CONFIDENT_M, UNSEEN_SPEED, mirrored_legs, swivel_radius, widened
 from samba_server.recon.db import load_default_db
 from samba_server.recon.evaluate import vary_body
 from samba_server.recon.reconstruct import reconstruct_take
@@ -84,3 +84,20 @@ def test_no_confidently_wrong_joint_on_a_motion_the_database_lacks(cmu_dir):
     assert (far & sure).any(axis=1).mean() <= 0.005 and err[sure].max() < 0.25  # issue 12's target
     assert sure[:, list(MARKER_JOINT)].all() and sure.mean() > 0.8
     assert (err <= info["joint_bound"]).mean() > 0.95  # a bound, not a guess of the error
+
+
+def test_legs_unsure_of_their_side_widen_the_knees_and_ankles_to_the_other_side():
+    """Legs one behind the other (a lunge), their side unsure: each knee's and ankle's bound is
+    at least its distance from the other side's joint, where it would be named the other way
+    round; the hips and the rest keep theirs, and sure frames are untouched."""
+    J = {n: i for i, n in enumerate(JOINT_NAMES)}
+    joints = np.zeros((2, 13, 3))
+    joints[:, J["left_knee"]], joints[:, J["right_knee"]] = [0.0, 0.2, 0.5], [0.0, -0.2, 0.5]
+    joints[:, J["left_ankle"]], joints[:, J["right_ankle"]] = [0.0, 0.3, 0.1], [0.0, -0.3, 0.1]
+    bounds = np.full((2, 13), 0.03)
+    out = mirrored_legs(bounds, joints, np.array([True, False]))
+    assert np.allclose(out[0, [J["left_knee"], J["right_knee"]]], 0.4)
+    assert np.allclose(out[0, [J["left_ankle"], J["right_ankle"]]], 0.6)
+    rest = [j for j in range(13) if j not in (J["left_knee"], J["right_knee"], J["left_ankle"], J["right_ankle"])]
+    assert np.allclose(out[0, rest], 0.03) and np.allclose(out[1], bounds[1])
+    assert (out[0, J["left_knee"]] >= CONFIDENT_M) and bounds[0, J["left_knee"]] == 0.03  # a new array
