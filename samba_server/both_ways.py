@@ -522,12 +522,23 @@ def _fits_better(fwd: PassResult, bwd: PassResult, nf: np.ndarray, nb: np.ndarra
     ones (:func:`_misfit`, over the frames where each pass that names a marker has a
     residual: a solver still measuring the subject judged nothing): the reconstruction's fit
     as the judge of two namings no rule told apart. Where neither naming fits a body well, the
-    better of two bad fits is no verdict: the database fits an uncrossed naming of crossed feet better than the truth (a
-    dance on the mixed-height rig: 99.2 -> 58.9 % of frames all right without that bound).
+    better of two bad fits is no verdict: the database fits an uncrossed naming of crossed feet
+    better than the truth (a dance on the mixed-height rig: 99.2 -> 58.9 % of frames all right
+    without that bound).
     Frames where the two differ only in markers one of them leaves unnamed are not judged and
     end a run: the wrists named the wrong way round by the backward pass, then alike but for a
     hidden hand, then the forward pass's wrists wrong, are two verdicts, not one that gave the
-    backward names to both (002_09 on a fresh body). nf, nb: (F, 8) bool, the forward,
+    backward names to both (002_09 on a fresh body). Within a run that takes the backward
+    names, a stretch between two renames of either pass (where its names change) whose
+    forward names fit clearly better (the same test the other way round) keeps them. A
+    swordplay's forward pass had the legs the wrong way round for 1 s until its knees' hold
+    swapped them, the backward pass from the take's end for 1.2 s until its own did, the two
+    stretches touching: judged as one run the backward names fitted better and were taken
+    for both, the legs wrong for the last 1.2 s (002_07 seed 601, 71.1 -> 79.8 % of frames all
+    right with the stretches apart). Judging the stretches apart both ways (a stretch whose
+    backward names fit clearly better taking them in a run that does not) also mended a climb
+    on the high rig (001_14 seed 3, 70.2 -> 80.8 %) but lost 15 frames on four other takes, 9
+    of them on a seed never used before (002_10 seed 604). nf, nb: (F, 8) bool, the forward,
     backward pass names marker m; both: (F, 8) bool, the two name it at the same point. False
     everywhere when a pass has no residuals."""
     F = len(fwd.markers)
@@ -536,12 +547,26 @@ def _fits_better(fwd: PassResult, bwd: PassResult, nf: np.ndarray, nb: np.ndarra
         return out
     judged = (np.isfinite(fwd.residual) | ~nf.any(axis=1)) & (np.isfinite(bwd.residual) | ~nb.any(axis=1))
     apart = (nf & nb & ~both).any(axis=1)  # some marker named by both, at points apart
+    # where either pass renamed, its names change: a stretch between may keep the forward names
+    cut = np.zeros(F + 1, bool)
+    cut[np.flatnonzero(fwd.renamed)] = True
+    cut[np.flatnonzero(bwd.renamed) + 1] = True  # a backward rename replaced the names after it
     for a, b in _runs(apart):
-        frames = a + np.flatnonzero(judged[a:b])
-        e_f, e_b = _misfit(fwd, frames), _misfit(bwd, frames)
-        well = e_b <= FIT_GOOD_M**2 * N_MARKERS * len(frames)
-        out[a:b] = well and e_b * FIT_RATIO < e_f and e_f - e_b > FIT_GAIN_M2
+        to_b, _ = _verdict(fwd, bwd, a + np.flatnonzero(judged[a:b]))
+        edges = [a, *(a + 1 + np.flatnonzero(cut[a + 1:b])), b]
+        for a2, b2 in zip(edges[:-1], edges[1:]):
+            out[a2:b2] = to_b and not _verdict(fwd, bwd, a2 + np.flatnonzero(judged[a2:b2]))[1]
     return out
+
+
+def _verdict(fwd: PassResult, bwd: PassResult, frames: np.ndarray) -> tuple[bool, bool]:
+    """(the backward names fit clearly better, the forward ones do) over frames (indices): fit
+    well (rms within ``FIT_GOOD_M``) and by ``FIT_RATIO`` times and ``FIT_GAIN_M2`` better
+    than the other pass's (:func:`_misfit`)."""
+    e_f, e_b = _misfit(fwd, frames), _misfit(bwd, frames)
+    good = FIT_GOOD_M**2 * N_MARKERS * len(frames)
+    return (bool(e_b <= good and e_b * FIT_RATIO < e_f and e_f - e_b > FIT_GAIN_M2),
+            bool(e_f <= good and e_f * FIT_RATIO < e_b and e_b - e_f > FIT_GAIN_M2))
 
 
 def _halves(renamed: np.ndarray) -> np.ndarray:

@@ -181,6 +181,35 @@ def test_the_fit_judges_each_run_of_disagreeing_names_on_its_own():
     assert _right(markers[wrists], truth[wrists]).all() and _right(markers[hidden], truth[hidden]).all()
 
 
+def test_the_fit_judges_apart_the_stretches_between_the_passes_renames():
+    """The forward pass names the legs the other way round in frames 100-129 until a rule swaps
+    them back at 130, fitting no body (2 cm rms); the backward pass, coming from the take's end,
+    names them the other way round in frames 130-139 until its own rule swaps them back at 129
+    (in its direction of travel, frame 140 -> 139), fitting a body at 8 mm. The two stretches
+    touch: one run of disagreeing names, whose backward names fit better as a whole. Taken for
+    all of it, the legs were wrong in 130-139 (a swordplay's last 1.2 s); there, between the
+    two renames, the forward names fit clearly better (2 mm) and are kept: every frame takes
+    the names that are right."""
+    truth, packets, t, server, fwd = _take(blackout=(0, 0))
+    bwd = backward_pass(server, packets, t)
+    legs, mirror = [LK, RK, LA, RA], [RK, LK, RA, LA]
+    rec = server.reconstructor.again(server.subject)
+
+    def mirrored(p: PassResult, frames: np.ndarray, renamed_at: int, residual_m: float) -> PassResult:
+        out = PassResult(p.markers.copy(), p.renamed.copy(), p.margin.copy())
+        out.markers[np.ix_(frames, legs)] = p.markers[np.ix_(frames, mirror)]
+        out.renamed[renamed_at] |= sum(1 << m for m in legs)
+        out.residual = np.array([r.residual for r in solve_frames(rec, p.markers, t, range(len(t)))])
+        out.residual[frames] = residual_m
+        return out
+
+    bad_f = mirrored(fwd, np.arange(100, 130), 130, 0.02)
+    bad_b = mirrored(bwd, np.arange(130, 140), 129, 0.008)
+    assert (bad_f.residual[130:140] < 0.0025).all()
+    markers, _from_b = choose(bad_f, bad_b, t)
+    assert _right(markers[95:150], truth[95:150]).all()
+
+
 def test_a_marker_the_two_passes_put_apart_is_not_confident_whichever_name_is_kept():
     """For 40 frames the forward pass names the left wrist 30 cm from where the backward pass
     names it, and no rule decides between them (no rename, no residuals to compare): the forward
