@@ -106,8 +106,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
         labelled_by_seq[msg.seq] = (q.renamed, q.margin_m if q.mode == "identified" else float("nan"),
                                     server.labeller.loose(np.asarray(msg.markers, float)), server.labeller.legs_unsure)
 
-    if both_ways:
-        server.pose_listeners.append(note_renamed)
+    server.pose_listeners.append(note_renamed)  # (legs_unsure is output one-pass too)
     i = 0
     while any(open_):
         if both_ways:
@@ -134,8 +133,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
             if progress is not None:
                 progress.update(1)
     server.finish()
-    if both_ways:
-        server.pose_listeners.remove(note_renamed)
+    server.pose_listeners.remove(note_renamed)
     n_frames = max(i, n_frames)
     joints = np.full((n_frames, 13, 3), np.nan)
     markers = np.full((n_frames, 8, 3), np.nan)
@@ -156,7 +154,8 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
             margin[k] = p.label_margin_m
             if p.joint_bound is not None:
                 bound[k] = p.joint_bound
-            renamed[k], identified[k], loose[k], legs_unsure[k] = labelled_by_seq.get(p.seq, (0, np.nan, loose[k], False))
+            renamed[k], identified[k], loose[k], legs_unsure[k] = labelled_by_seq.get(p.seq,
+                                                                                      (0, np.nan, loose[k], False))
             t_live[k] = (p.t_ns - t0_ns) / 1e9
     t = np.arange(n_frames) / fps
     extra = {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin,

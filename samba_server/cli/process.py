@@ -150,8 +150,8 @@ def legs_warnings(unsure: np.ndarray | None, joints: np.ndarray, t: np.ndarray,
     edges = np.flatnonzero(np.diff(np.r_[0, hit.astype(int), 0]))
     a, b = max(zip(edges[::2], edges[1::2]), key=lambda ab: ab[1] - ab[0])
     return [f"left and right legs unsure in {int(hit.sum())} of {int(solved.sum())} frames with a pose "
-            f"(longest {t[a]:.2f}-{t[b - 1]:.2f} s): the legs were named afresh (after a blackout or a loss) "
-            f"and their knees not seen apart since, so the markers cannot tell which leg is which (legs one "
+            f"(longest {t[a]:.2f}-{t[b - 1]:.2f} s): the legs were named afresh (at the start, after a blackout or "
+            f"a loss) and their knees not seen apart since, so the markers cannot tell which leg is which (legs one "
             f"behind the other, or knees in one blob); the knees and ankles there may be the other side's "
             f"(joint_bound says how far; legs_unsure in the output marks the frames)"]
 

@@ -54,6 +54,8 @@ def _run_process(tmp_path, capsys):
     assert main([str(calib), *map(str, videos), "--out", str(told), "--fps", "30", "--placement", "skin",
                  "--record", str(told_take), "--one-pass"]) == 0
     assert "from_backward" not in np.load(told)
+    assert np.load(told)["legs_unsure"].shape == (len(joints),)  # the live pass's doubt, one-pass too
+    assert not np.load(out)["legs_unsure"][-int(0.3 * FPS):].any()  # legs apart, tracked: sure
     assert "marker placement: skin (given: --placement" in capsys.readouterr().err
     assert str(np.load(told)["subject_placement"]) == "skin"
     assert replay_main([str(told_take), "--out", str(replayed)]) == 0
