@@ -35,6 +35,16 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   mistake. Where a kept forward name and a taken backward one fall on one point, neither
   stands (the two passes dispute it); a mix that would still name one point twice keeps the
   forward names;
+- where such a mix takes only the knee or only the ankle of a leg from the backward pass,
+  it takes the other too when the forward pass doubts its own name for it (even one the
+  backward pass doubts as well), the backward leg keeps the subject's shin length (the median
+  knee-ankle distance where the two passes name both alike) within ``SHIN_TOL_M`` and the
+  mixed leg is off it by more than ``SHIN_OFF_M`` (:func:`_whole_shins`): the knee of one pass
+  and the ankle of the other are no leg. A dancer's forward pass had both legs the wrong way
+  round for 1 s; the backward pass, right, doubted its ankles from a rename of its own that
+  the forward pass's wrong names confirmed, and the mix kept the forward ankles with the
+  backward knees (005_17 seed 601: 89.1 -> 95.6 % of frames all right; of twelve saved sets
+  one other take mended, 16 frames fewer with a wrong name, and three lost a frame each);
 - where a forward rename gave a marker another point while the backward pass, not doubting
   it, names it at the point both passes named it through the ``AGREED_S`` before, the
   backward name holds from the rename until the two name it alike again: the forward pass's
@@ -188,6 +198,10 @@ FIT_RATIO = 2.0
 FIT_GAIN_M2 = 0.003
 #: m: a pass names a leg marker as chosen when its marker is this near the chosen one
 ALIKE_M = 0.03
+#: m: a leg named by one pass keeps the subject's shin length within this ...
+SHIN_TOL_M = 0.03
+#: ... and a leg of one pass's knee and the other's ankle is no leg when off it by more than this
+SHIN_OFF_M = 0.06
 
 
 @dataclass
@@ -569,6 +583,49 @@ def _verdict(fwd: PassResult, bwd: PassResult, frames: np.ndarray) -> tuple[bool
             bool(e_f <= good and e_f * FIT_RATIO < e_b and e_b - e_f > FIT_GAIN_M2))
 
 
+#: (knee, ankle) of the left and the right leg
+_SHINS = ((LK, LA), (RK, RA))
+
+
+def _shin_lengths(markers: np.ndarray, both: np.ndarray) -> np.ndarray:
+    """(2,) m: the subject's left and right shin (knee to ankle marker) as the two passes measure
+    it where they name both markers of the leg at the same points: the median over those frames
+    of markers (F, 8, 3) (NaN where no frame has it); both: (F, 8) bool."""
+    out = np.full(2, np.nan)
+    for i, (kn, an) in enumerate(_SHINS):
+        at = both[:, kn] & both[:, an]
+        if at.any():
+            out[i] = float(np.median(np.linalg.norm(markers[at, kn] - markers[at, an], axis=1)))
+    return out
+
+
+def _whole_shins(take: np.ndarray, fwd: np.ndarray, bwd: np.ndarray, doubted: np.ndarray,
+                 shin: np.ndarray) -> np.ndarray:
+    """take (8,) bool (the names one frame takes from the backward pass) grown by the other
+    marker of each leg of which only the knee or the ankle is taken, where the forward pass
+    doubts its own name for it and the backward pass names it elsewhere (doubted (8,) bool),
+    even a name the backward pass doubts too, when the leg named from the backward pass alone
+    keeps the subject's shin length (shin (2,) m, :func:`_shin_lengths`) within ``SHIN_TOL_M``
+    and the mixed leg is off it by more than ``SHIN_OFF_M``: the knee of one pass and the
+    ankle of the other are no leg (a dancer's legs swapped in the forward pass; the backward
+    pass, right, doubted its ankles from a rename of its own that the forward pass's wrong
+    names confirmed; the mix took the backward knees and kept the forward ankles for 1 s).
+    fwd, bwd: (8, 3) the frame's names of each pass."""
+    out = take.copy()
+    for i, (kn, an) in enumerate(_SHINS):
+        if not np.isfinite(shin[i]) or take[kn] == take[an]:
+            continue
+        other = an if take[kn] else kn
+        if not doubted[other]:
+            continue
+        d_b = float(np.linalg.norm(bwd[kn] - bwd[an]))
+        mix_k, mix_a = (bwd[kn], fwd[an]) if take[kn] else (fwd[kn], bwd[an])
+        d_m = float(np.linalg.norm(mix_k - mix_a))
+        if abs(d_b - shin[i]) <= SHIN_TOL_M and abs(d_m - shin[i]) > SHIN_OFF_M:
+            out[other] = True
+    return out
+
+
 def _halves(renamed: np.ndarray) -> np.ndarray:
     """(F,) int bits: every marker of each half of the body (the legs; the shoulders and wrists)
     in which renamed ((F,) int bits) has a marker."""
@@ -586,7 +643,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     doubted its own (a rename the backward naming confirms: the renamed markers, or every
     marker of their halves of the body where the two namings agree as a whole at the rename)
     and the backward pass names it and did not doubt it (with the markers the forward pass
-    left unnamed in that frame), and
+    left unnamed in that frame, and the rest of a leg whose knee and ankle the mix would take
+    from different passes against the subject's shin: :func:`_whole_shins`), and
     every name of a frame the forward pass names nothing in (see the module docstring); the
     backward names across a gap in the forward names of a marker that they continue
     (:func:`_bridged`); and
@@ -641,6 +699,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         & ~same[:, [LS, RS]].all(axis=1)
     bridged = _bridged(nf, nb, both)
     refuted = _refuted(fwd.renamed, nf, nb, both, t)
+    shin = _shin_lengths(fwd.markers, both)
     markers = fwd.markers.copy()
     from_b = np.zeros(len(t), bool)
     for k in range(len(t)):
@@ -656,6 +715,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         if take.any():
             take |= ~nf[k] & sure_b  # a naming found wrong in part: its gaps are filled in too
         take |= (bridged[k] | refuted[k]) & sure_b
+        if take.any():
+            take = _whole_shins(take, fwd.markers[k], bwd.markers[k], bit_markers(doubt_f[k]) & nb[k] & ~same[k], shin)
         if not take.any():
             continue
         mixed = markers[k].copy()

@@ -505,6 +505,39 @@ def test_a_swap_of_both_legs_mended_in_two_steps_is_doubted_back_to_where_it_beg
     assert np.allclose(markers[100:140, [LK, RK]], early[100:140, [LK, RK]])
 
 
+def test_a_leg_is_taken_whole_from_one_pass_where_a_knee_of_one_and_an_ankle_of_the_other_break_the_shin():
+    """A dancer's legs: the forward pass renames the ankles the wrong way round at frame 99,
+    tracks the knees onto the wrong legs from 110 and renames all four right at 200. The
+    backward pass is right but for frames 99-100, where a rename of its own at 100 made its
+    ankles agree with the forward pass's wrong ones; so it doubts its ankles for the second
+    after. The mix took its knees and kept the forward ankles, a knee on one leg and an
+    ankle on the other, 9-11 cm off the shin length the two passes measure together: the
+    backward ankles come with the backward knees. Backward ankles that break the shin
+    themselves do not."""
+    F = 300
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)  # the upper body's markers 1 m apart
+    legs = np.array([[-0.1, 0.0, 0.5], [0.1, 0.1, 0.5], [-0.1, -0.15, 0.08], [0.1, 0.3, 0.1]])  # LK RK LA RA
+    b[:, [LK, RK, LA, RA]] = legs + [5.0, 0.0, 0.0]
+    a = b.copy()
+    a[99:200, [LA, RA]] = b[99:200, [RA, LA]]
+    a[110:200, [LK, RK]] = b[110:200, [RK, LK]]
+    bwd = b.copy()
+    bwd[99:101, [LA, RA]] = b[99:101, [RA, LA]]
+    ren_f, ren_b = np.zeros(F, np.int64), np.zeros(F, np.int64)
+    ren_f[99] = (1 << LA) | (1 << RA)
+    ren_f[200] = (1 << LK) | (1 << RK) | (1 << LA) | (1 << RA)
+    ren_b[100] = (1 << LA) | (1 << RA)
+    markers, _from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(bwd, ren_b, np.zeros(F)), t)
+    assert np.allclose(markers[110:200], b[110:200])
+    off = bwd.copy()
+    off[101:200, [LA, RA]] += [0.0, 0.0, 0.06]  # the backward ankles 6 cm off there
+    markers, _from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(off, ren_b, np.zeros(F)), t)
+    assert np.allclose(markers[110:161, [LK, RK]], off[110:161, [LK, RK]])
+    assert np.allclose(markers[110:161, [LA, RA]], a[110:161, [LA, RA]])
+
+
 def test_a_backward_rename_doubts_its_names_only_up_to_where_the_forward_pass_confirmed_them():
     """The backward pass (walking back in time) named the left wrist wrong from frame 130 to
     101 and renamed it at 100; from 131 on the forward pass names it at the same point: there
