@@ -513,7 +513,8 @@ class Labeller:
                 continue  # a point of its own may be there: no sharing
             best = None
             for m in np.flatnonzero(assign >= 0):
-                if np.count_nonzero(assign == assign[m]) > 1 or not _two_in_one(pts, assign[m]):
+                if np.count_nonzero(assign == assign[m]) > 1 or \
+                        not _two_in_one(pts, assign[m], self.config.points.rough_px):
                     continue
                 sep = float(np.linalg.norm(pred[m] - pred[n]))
                 dn = float(np.linalg.norm(pts.X[assign[m]] - pred[n]))
@@ -1589,11 +1590,16 @@ def _margin(labels: np.ndarray, score: float, rivals: list) -> float:
     return score - max(scores) if scores else score
 
 
-def _two_in_one(pts: Points3D, p: int) -> bool:
+def _two_in_one(pts: Points3D, p: int, rough_px: float) -> bool:
     """Point p may hold two markers: its blobs are double-sized everywhere, or merged in all
-    its views but at most one."""
+    its views but at most one, or it is seen by >= 4 views that disagree by more than rough_px
+    (rms px): two markers a few cm apart, each hidden from some views behind the other and
+    merged in the rest, make one blob of one marker's size in each view, but not the same
+    marker's (feet together, one behind the other: 0.4-0.6 px, against 0.03-0.15 for one
+    marker)."""
     return bool(pts.merged_all[p]) or (not pts.mirrored[p] and pts.n_merged[p] >= 2
-                                       and pts.n_merged[p] >= pts.n_views[p] - 1)
+                                       and pts.n_merged[p] >= pts.n_views[p] - 1) \
+        or (pts.n_views[p] >= 4 and float(pts.error[p]) > rough_px)
 
 
 def facing_of(left: np.ndarray, right: np.ndarray) -> np.ndarray | None:

@@ -538,6 +538,31 @@ def test_a_leg_is_taken_whole_from_one_pass_where_a_knee_of_one_and_an_ankle_of_
     assert np.allclose(markers[110:161, [LA, RA]], a[110:161, [LA, RA]])
 
 
+def test_where_both_passes_doubt_a_name_the_fit_splits_the_stretch_between_their_renames():
+    """Two hands pass each other at frame 135 and each pass's tracking swaps them there: the
+    forward pass has the wrists the wrong way round in 135-157 and renames them at 158, the
+    backward pass (walking back in time) in 134-128 and renames them at 127. In 128-157 each
+    doubts its own wrists and the two never agree: keeping the forward names had them wrong
+    for 135-157. The stretch splits where the passes' fits say: forward names before 135,
+    backward after. Without residuals the forward names stay."""
+    F = 300
+    t = np.arange(F) / FPS
+    truth = np.zeros((F, 8, 3))
+    truth[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    a, b = truth.copy(), truth.copy()
+    a[135:158, [LW, RW]] = truth[135:158, [RW, LW]]
+    b[128:135, [LW, RW]] = truth[128:135, [RW, LW]]
+    ren_f, ren_b = np.zeros(F, np.int64), np.zeros(F, np.int64)
+    ren_f[158] = ren_b[127] = (1 << LW) | (1 << RW)
+    res_f, res_b = np.full(F, 0.008), np.full(F, 0.008)  # no body fits well: no verdict of the fit
+    res_f[135:158] = res_b[128:135] = 0.012  # the swapped wrists fit worse
+    markers, _from_b = choose(PassResult(a, ren_f, np.zeros(F), residual=res_f),
+                              PassResult(b, ren_b, np.zeros(F), residual=res_b), t)
+    assert np.allclose(markers, truth)
+    markers, _from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, ren_b, np.zeros(F)), t)
+    assert np.allclose(markers, a)
+
+
 def test_a_backward_rename_doubts_its_names_only_up_to_where_the_forward_pass_confirmed_them():
     """The backward pass (walking back in time) named the left wrist wrong from frame 130 to
     101 and renamed it at 100; from 131 on the forward pass names it at the same point: there
