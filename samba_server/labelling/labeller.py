@@ -81,7 +81,6 @@ class LabelConfig:
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
     crossed_memory_s: float = 2.0  #: a pair named crossed this little before the names were lost may be crossed again
     knees_crossed_s: float = 1.0  #: knees crossed (by crossed_m) this long are the legs' names swapped (inf: never)
-    rough_share_m: float = 0.10  #: a marker left out shares a named neighbour's rough point (>= 4 views disagreeing, see _rough) only when their predictions are this close
     legs_sure_m: float = 0.08  #: legs named afresh are unsure (:attr:`Labeller.legs_unsure`) until the knees are named this far apart along the subject's right, the left one on the left (inf: always unsure)
     arm_swap_s: float = 0.05  #: a shoulder off the shoulder width whose own wrist's point fits it this long swaps with that wrist (inf: never)
     reach_swap_m: float = 0.02  #: the wrists swap names when one is this far beyond its arm's reach from its shoulder ... (inf: never)
@@ -514,10 +513,9 @@ class Labeller:
                 continue  # a point of its own may be there: no sharing
             best = None
             for m in np.flatnonzero(assign >= 0):
-                sep = float(np.linalg.norm(pred[m] - pred[n]))
-                rough = sep <= cfg.rough_share_m and _rough(pts, assign[m], cfg.points.rough_px)
-                if np.count_nonzero(assign == assign[m]) > 1 or not (_two_in_one(pts, assign[m]) or rough):
+                if np.count_nonzero(assign == assign[m]) > 1 or not _two_in_one(pts, assign[m]):
                     continue
+                sep = float(np.linalg.norm(pred[m] - pred[n]))
                 dn = float(np.linalg.norm(pts.X[assign[m]] - pred[n]))
                 if sep <= 2 * cfg.merged_half_m + 0.04 and dn <= gate[n] + cfg.merged_half_m and \
                         (best is None or dn < best[0]):
@@ -1596,14 +1594,6 @@ def _two_in_one(pts: Points3D, p: int) -> bool:
     its views but at most one."""
     return bool(pts.merged_all[p]) or (not pts.mirrored[p] and pts.n_merged[p] >= 2
                                        and pts.n_merged[p] >= pts.n_views[p] - 1)
-
-
-def _rough(pts: Points3D, p: int, rough_px: float) -> bool:
-    """Point p is seen by >= 4 views that disagree by more than rough_px (rms px): it may be
-    two markers a few cm apart, each hidden from some views behind the other and merged with
-    it in the rest, one blob of one marker's size in each view but not the same marker's
-    (feet together, one behind the other: 0.4-0.6 px, against 0.03-0.15 for one marker)."""
-    return bool(pts.n_views[p] >= 4 and float(pts.error[p]) > rough_px)
 
 
 def facing_of(left: np.ndarray, right: np.ndarray) -> np.ndarray | None:

@@ -563,48 +563,6 @@ def test_two_markers_merged_in_all_views_but_one_become_two_points():
     assert (off < 0.04).all(), off
 
 
-def test_feet_together_each_seen_by_different_views_share_their_one_point():
-    """Feet brought together, 6 cm apart: no view parts the ankles. One view sees both in one
-    blob, one only the right (the left hidden behind it), two only the left. The four views make
-    one point 2-4 cm from each ankle that they do not agree on (0.4-0.6 px rms, against 0.1 for
-    a marker's point) and no blob is merged or double-sized: the ankle named first keeps the
-    point and the other went unnamed, though two views saw it alone (a rendered take: 40
-    frames so). The views' disagreement says the point holds two markers: both ankles name it
-    (parted along the body's right as a shared point is), loose for the solver."""
-    rig = default_rig(4)
-    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
-    rng = np.random.default_rng(1)
-
-    def packets(m, t, hide):
-        out = []
-        for c, cam in enumerate(rig.cameras):
-            uv, keep = cam.project(m), np.ones(8, bool)
-            if hide is not None and hide[c] == "both":
-                uv[LA], keep[RA] = 0.5 * (uv[LA] + uv[RA]), False
-            elif hide is not None:
-                keep[hide[c]] = False
-            uv = uv[keep] + rng.normal(0, 0.1, (int(keep.sum()), 2))
-            out.append(MarkerPacket(cam.name, 0, int(t * 1e9), 160, 120, 100, np.full(len(uv), UNLABELLED, np.uint8),
-                                    uv.astype(np.float32), np.full(len(uv), 9, np.uint16), np.zeros(len(uv), np.uint8)))
-        return out
-
-    lab = Labeller(rig)
-    for i in range(30):
-        got, _q = lab.label(packets(pose, i / FPS, None), i / FPS)
-    assert np.isfinite(got).all()
-    feet, mid = pose.copy(), 0.5 * (pose[LA] + pose[RA])
-    for i in range(30, 60):
-        w = min(1.0, (i - 30) / 10)  # the feet come together over 1/6 s
-        feet[LA] = pose[LA] + w * (mid - [0.03, 0.0, 0.0] - pose[LA])
-        feet[RA] = pose[RA] + w * (mid + [0.03, 0.0, 0.0] - pose[RA])
-        got, _q = lab.label(packets(feet, i / FPS, ["both", LA, RA, RA] if i >= 40 else None), i / FPS)
-        if i >= 40:
-            assert np.isfinite(got[[LA, RA]]).all(), i
-            assert (np.linalg.norm(got[[LA, RA]] - feet[[LA, RA]], axis=1) < 0.05).all()
-            assert lab.loose(got)[[LA, RA]].all()
-    assert _right(got[None, :6], feet[None, :6]).all()
-
-
 def test_a_small_subjects_merged_legs_are_named_in_the_standard_pose():
     """A small subject (shoulders at 1.33 m) with the feet at hip width: knees merge into one
     point and ankles into another (points of a rendered take, traced; four 2-view ghosts of
