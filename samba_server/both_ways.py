@@ -51,7 +51,8 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   passes' solves fit best (:func:`_split_doubts`). Two hands passing each other were swapped
   by both passes' tracking at the crossing; keeping the forward names had them wrong until the
   forward rename 0.4 s later (ten saved sets: 42 frames fewer not all right, gains on seven
-  takes, 2-3 frames lost on a swordplay's wrists in four sets);
+  takes, 2-3 frames lost on a swordplay's wrists in four sets). With three cameras or more, as
+  the fit rule below: with two, every 2-view point fits some body;
 - where a forward rename gave a marker another point while the backward pass, not doubting
   it, names it at the point both passes named it through the ``AGREED_S`` before, the
   backward name holds from the rename until the two name it alike again: the forward pass's
@@ -678,9 +679,10 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     doubted its own (a rename the backward naming confirms: the renamed markers, or every
     marker of their halves of the body where the two namings agree as a whole at the rename)
     and the backward pass names it and did not doubt it, or doubted it too but the split of
-    the two doubts gives it the frame (:func:`_split_doubts`) (with the markers the forward pass
-    left unnamed in that frame, and the rest of a leg whose knee and ankle the mix would take
-    from different passes against the subject's shin: :func:`_whole_shins`), and
+    the two doubts gives it the frame (:func:`_split_doubts`; not with ``fit`` False) (with
+    the markers the forward pass left unnamed in that frame, and the rest of a leg whose knee
+    and ankle the mix would take from different passes against the subject's shin:
+    :func:`_whole_shins`), and
     every name of a frame the forward pass names nothing in (see the module docstring); the
     backward names across a gap in the forward names of a marker that they continue
     (:func:`_bridged`); and
@@ -736,7 +738,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     bridged = _bridged(nf, nb, both)
     refuted = _refuted(fwd.renamed, nf, nb, both, t)
     shin = _shin_lengths(fwd.markers, both)
-    split_b = _split_doubts(fwd, bwd, bit_markers(doubt_f & doubt_b) & nf & nb & ~same)
+    split_b = _split_doubts(fwd, bwd, bit_markers(doubt_f & doubt_b) & nf & nb & ~same) if fit \
+        else np.zeros(nf.shape, bool)
     markers = fwd.markers.copy()
     from_b = np.zeros(len(t), bool)
     for k in range(len(t)):
