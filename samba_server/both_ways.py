@@ -171,6 +171,8 @@ __all__ = ["PassResult", "backward_pass", "choose", "disputed_m", "end_facing", 
 COIN_M = 0.01
 #: ... and one by this much (the labelling's ``min_margin``: taken at once) was clear
 CLEAR_M = 0.06
+#: m: the margin the standard pose's identification counts as (a take's first: never a coin flip)
+STANDARD_POSE_M = 1e9
 #: s: a rename that left a marker unnamed is checked where the forward pass names it next,
 #: at most this much later
 NEXT_S = 0.1
@@ -236,13 +238,14 @@ class PassResult:
 
 def _standard_pose_clear(identified: np.ndarray | None) -> np.ndarray | None:
     """A copy of a forward pass's identification margins (F,) (NaN elsewhere) with its first
-    one, the standard pose's, set to inf: never a coin flip. None stays None."""
+    one, the standard pose's, set to ``STANDARD_POSE_M``: never a coin flip, and its lineage
+    (:func:`_lineage`) tells the frames that descend from it. None stays None."""
     if identified is None:
         return None
     out = identified.copy()
     first = np.flatnonzero(np.isfinite(out))
     if first.size:
-        out[first[0]] = np.inf
+        out[first[0]] = STANDARD_POSE_M
     return out
 
 
@@ -264,7 +267,7 @@ def end_facing(fwd: PassResult, t: np.ndarray, within_s: float = END_FACING_S) -
         if float(t[-1] - t[k]) > within_s:
             break
         if named[k, [LS, RS]].all():
-            coin_flip = bool(lineage[k] < COIN_M)  # (NaN: the standard pose's lineage)
+            coin_flip = bool(lineage[k] < COIN_M)
             return None if coin_flip else facing_of(fwd.markers[k, LS], fwd.markers[k, RS])
     return None
 
@@ -719,8 +722,14 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     renamed = fwd.renamed.astype(np.int64)
     whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
     confirmed = np.where(whole & (renamed != 0), _halves(renamed), renamed & agree)
-    doubt_f = _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True) \
-        | _apart_before(confirmed, same, t, own=renamed)
+    ident_f = _standard_pose_clear(fwd.identified)
+    # the two passes agreeing as a whole settle a coin flip: later frames do not descend from it
+    settled = ((nf & nb).sum(axis=1) >= 4) & same.all(axis=1)
+    lin_f = _lineage(ident_f, nf.any(axis=1), forward=True, settled=settled, renamed=fwd.renamed)
+    # names that descend from the standard pose's identification, with no agreement as a whole
+    # of the two passes since (the backward pass never once named them so): no rename doubts them
+    doubt_f = np.where(lin_f >= STANDARD_POSE_M, 0, _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True)
+                       | _apart_before(confirmed, same, t, own=renamed))
     # and the other way round: a backward rename counts where the forward pass names those
     # markers at the same points (tracking them, not renaming them)
     agree_b = alike & ~renamed
@@ -729,10 +738,6 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     # renames: the passes agreeing before one are as often both wrong alike (module docstring)
     doubt_b = _doubted(bwd.renamed.astype(np.int64) & agree_b, nb.any(axis=1), t, window_s, forward=False,
                        confirmed=both)
-    ident_f = _standard_pose_clear(fwd.identified)
-    # the two passes agreeing as a whole settle a coin flip: later frames do not descend from it
-    settled = ((nf & nb).sum(axis=1) >= 4) & same.all(axis=1)
-    lin_f = _lineage(ident_f, nf.any(axis=1), forward=True, settled=settled, renamed=fwd.renamed)
     lin_b = _lineage(bwd.identified, nb.any(axis=1), forward=False, renamed=bwd.renamed)
     flip = (lin_f < COIN_M) & (lin_b >= CLEAR_M) & (nb.sum(axis=1) >= np.minimum(nf.sum(axis=1), 4)) \
         & ~same[:, [LS, RS]].all(axis=1)
