@@ -35,6 +35,13 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   mistake. Where a kept forward name and a taken backward one fall on one point, neither
   stands (the two passes dispute it); a mix that would still name one point twice keeps the
   forward names;
+- never in frames whose forward names descend from the standard pose's identification (the
+  take's first, clear) while the two passes have not once agreed as a whole since: a backward
+  pass that came into the standard pose mirrored is the one to doubt there. A climb's forward
+  pass renamed a shoulder 1.9 s in; the doubt reached back over the whole standard pose, where
+  the backward pass named every marker on its mirror partner's point, and the mix left both
+  shoulders unnamed for 1.8 s (001_14 seed 604: 79.5 -> 97.9 % of frames all right; no other
+  take of ten saved 4-camera sets changed, 14 saved 2-camera takes 4 frames better);
 - where such a mix takes only the knee or only the ankle of a leg from the backward pass,
   it takes the other too when the forward pass doubts its own name for it (even one the
   backward pass doubts as well), the backward leg keeps the subject's shin length (the median

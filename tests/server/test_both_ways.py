@@ -563,6 +563,38 @@ def test_where_both_passes_doubt_a_name_the_fit_splits_the_stretch_between_their
     assert np.allclose(markers, a)
 
 
+def test_names_from_the_standard_pose_the_backward_pass_never_agreed_with_are_not_doubted():
+    """A climb: the forward pass names the standard pose from frame 0 (a clear identification)
+    and holds the names; its right shoulder goes wrong at 108 and an identification renames the
+    shoulders at 114. The backward pass came into the standard pose mirrored (every marker on
+    its mirror partner's point) and never named it otherwise until 107. The rename doubted the
+    shoulders back to where the passes last agreed, the whole standard pose, and there the mix
+    left both shoulders unnamed (the backward right shoulder on the forward left one's point).
+    Names that descend from the standard pose, the two passes never once agreeing on them since,
+    are not doubted. Once the passes agreed as a whole, the standard pose's names are doubted as
+    any others."""
+    F = 300
+    t = np.arange(F) / FPS
+    truth = np.zeros((F, 8, 3))
+    truth[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    a = truth.copy()
+    a[108:112, RS] += [0.0, 0.0, 0.3]
+    bwd = truth.copy()
+    bwd[:107] = truth[:107][:, MIRROR]
+    ren_f, ren_b = np.zeros(F, np.int64), np.zeros(F, np.int64)
+    ren_f[114] = (1 << LS) | (1 << RS)
+    ren_b[106] = 0xFF  # walking back in time, the backward pass renamed into the mirror image there
+    ident = np.full(F, np.nan)
+    ident[0] = ident[114] = 0.12
+    markers, _from_b = choose(PassResult(a, ren_f, np.zeros(F), ident), PassResult(bwd, ren_b, np.zeros(F)), t)
+    assert np.allclose(markers[:108], truth[:108])
+    assert np.allclose(markers[108:112, RS], truth[108:112, RS])  # the wrong shoulder still gives way
+    agreed = bwd.copy()
+    agreed[5] = truth[5]  # the two passes agree as a whole at frame 5
+    markers, _from_b = choose(PassResult(a, ren_f, np.zeros(F), ident), PassResult(agreed, ren_b, np.zeros(F)), t)
+    assert np.allclose(markers[60:100, [LS, RS]], agreed[60:100, [LS, RS]])  # the rename's doubt holds
+
+
 def test_a_backward_rename_doubts_its_names_only_up_to_where_the_forward_pass_confirmed_them():
     """The backward pass (walking back in time) named the left wrist wrong from frame 130 to
     101 and renamed it at 100; from 131 on the forward pass names it at the same point: there
