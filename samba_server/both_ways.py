@@ -608,10 +608,6 @@ def _verdict(fwd: PassResult, bwd: PassResult, frames: np.ndarray) -> tuple[bool
             bool(e_f <= good and e_f * FIT_RATIO < e_b and e_b - e_f > FIT_GAIN_M2))
 
 
-#: (knee, ankle) of the left and the right leg
-_SHINS = ((LK, LA), (RK, RA))
-
-
 def _split_doubts(fwd: PassResult, bwd: PassResult, both_doubt: np.ndarray) -> np.ndarray:
     """(F, 8) bool: where both passes doubt their names of a marker and name it apart
     (both_doubt (F, 8) bool), the frames that take the backward name. Each pass was wrong next
@@ -632,6 +628,10 @@ def _split_doubts(fwd: PassResult, bwd: PassResult, both_doubt: np.ndarray) -> n
             s = a + int(np.argmin(cost))
             out[s:b, m] = True
     return out
+
+
+#: (knee, ankle) of the left and the right leg
+_SHINS = ((LK, LA), (RK, RA))
 
 
 def _shin_lengths(markers: np.ndarray, both: np.ndarray) -> np.ndarray:
