@@ -158,7 +158,7 @@ from samba_common.skeleton import N_MARKERS
 
 from .labelling import bit_markers, marker_bits
 from .labelling.labeller import facing_of
-from .labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW
+from .labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW, SIDES
 from .recon.bounds import mirrored_legs, widened
 from .recon.reconstruct import solve_both_ways
 from .server import Server, ServerConfig
@@ -630,16 +630,12 @@ def _split_doubts(fwd: PassResult, bwd: PassResult, both_doubt: np.ndarray) -> n
     return out
 
 
-#: (knee, ankle) of the left and the right leg
-_SHINS = ((LK, LA), (RK, RA))
-
-
 def _shin_lengths(markers: np.ndarray, both: np.ndarray) -> np.ndarray:
     """(2,) m: the subject's left and right shin (knee to ankle marker) as the two passes measure
     it where they name both markers of the leg at the same points: the median over those frames
     of markers (F, 8, 3) (NaN where no frame has it); both: (F, 8) bool."""
     out = np.full(2, np.nan)
-    for i, (kn, an) in enumerate(_SHINS):
+    for i, (_s, _w, kn, an) in enumerate(SIDES):
         at = both[:, kn] & both[:, an]
         if at.any():
             out[i] = float(np.median(np.linalg.norm(markers[at, kn] - markers[at, an], axis=1)))
@@ -659,7 +655,7 @@ def _whole_shins(take: np.ndarray, fwd: np.ndarray, bwd: np.ndarray, doubted: np
     names confirmed; the mix took the backward knees and kept the forward ankles for 1 s).
     fwd, bwd: (8, 3) the frame's names of each pass."""
     out = take.copy()
-    for i, (kn, an) in enumerate(_SHINS):
+    for i, (_s, _w, kn, an) in enumerate(SIDES):
         if not np.isfinite(shin[i]) or take[kn] == take[an]:
             continue
         other = an if take[kn] else kn
@@ -751,6 +747,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     bridged = _bridged(nf, nb, both)
     refuted = _refuted(fwd.renamed, nf, nb, both, t)
     shin = _shin_lengths(fwd.markers, both)
+    doubted_f = bit_markers(doubt_f)  # (F, 8) the markers the forward pass doubts
     split_b = _split_doubts(fwd, bwd, bit_markers(doubt_f & doubt_b) & nf & nb & ~same) if fit \
         else np.zeros(nf.shape, bool)
     markers = fwd.markers.copy()
@@ -764,13 +761,12 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
             markers[k], from_b[k] = bwd.markers[k], True
             continue
         sure_b = nb[k] & (~bit_markers(doubt_b[k]) | split_b[k])  # backward names not doubted, or split so
-        take = bit_markers(doubt_f[k]) & sure_b & ~same[k]
+        take = doubted_f[k] & sure_b & ~same[k]
         if take.any():
             take |= ~nf[k] & sure_b  # a naming found wrong in part: its gaps are filled in too
         take |= (bridged[k] | refuted[k]) & sure_b
         if take.any():
-            take = _whole_shins(take, fwd.markers[k], bwd.markers[k], bit_markers(doubt_f[k]) & nb[k] & ~same[k],
-                                shin)
+            take = _whole_shins(take, fwd.markers[k], bwd.markers[k], doubted_f[k] & nb[k] & ~same[k], shin)
         if not take.any():
             continue
         mixed = markers[k].copy()
