@@ -63,7 +63,9 @@ class LabelConfig:
     merged_m: float = 0.02  #: a point seen in a merged blob costs this much more
     unexplained_m: float = 0.03  #: a 2-view point costs this much more per view that should have seen it
     merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it (the guess; see split_sigma_px)
-    split_sigma_px: float = float("inf")  #: noise of the separation a merged blob's moments measure, to split two markers on one point by it (inf: off, the default: see docs/labelling.md; 0.5 on the simulator's blobs)
+    split_sigma_px: float = float("inf")  #: noise of the separation a merged blob's moments measure, to split two markers on one point by it, but the knees or the ankles (inf: off, the default: see docs/labelling.md; 0.5 on the simulator's blobs)
+    split_legs_sigma_px: float = 0.5  #: the same for the two knees or the two ankles (inf: off; on by default: the hip width the subject is measured with comes from them) ...
+    split_legs_max_deg: float = 35.0  #: ... used only this close in direction to the guess (the subject's right): further off, the guess cannot tell which end is which
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
     rescue_m: float = 0.06  #: a tracked shoulder or wrist with no point is triangulated from two views' blobs within this of its prediction (0: never) ...
@@ -1241,12 +1243,13 @@ class Labeller:
     def _split_shared(self, out: np.ndarray, assign: np.ndarray, pts: Points3D, pred: np.ndarray,
                       right: np.ndarray | None) -> None:
         """Markers named to the same (merged) point: place them either side of it, by the guess
-        of :func:`_guess_split`, or (opt-in, ``split_sigma_px``) by their separation measured
-        from the merged blobs' moments (:meth:`_measured_split`, that guess as its prior). Two
-        wrists (hands together) are split along their tracks' predictions, which carry the
-        hands' last separation and motion (one above the other on a sword hilt, crossing over
-        each other in a dance), and along the subject's right only when those coincide: the
-        names the hands part with come from this split. With two cameras the wrists' tracks are
+        of :func:`_guess_split`, or by their separation measured from the merged blobs' moments
+        (:meth:`_measured_split`, that guess as its prior): the two knees or the two ankles
+        (``split_legs_sigma_px``) where it lies within ``split_legs_max_deg`` of the guess, other
+        pairs opt-in (``split_sigma_px``). Two wrists (hands together) are split along their
+        tracks' predictions, which carry the hands' last separation and motion (one above the
+        other on a sword hilt, crossing over each other in a dance), and along the subject's
+        right only when those coincide: the names the hands part with come from this split. With two cameras the wrists' tracks are
         too often on ghosts: :meth:`_wrists_split` chooses. out (8, 3) in place; assign (8,)
         point per marker (-1: none); pred (8, 3) the markers' predictions; right (3,) the
         subject's right or None."""
@@ -1265,7 +1268,17 @@ class Labeller:
                 off = lateral if off is None else self._wrists_split(out, pred, lateral, off)
             if off is None:  # no way to tell which end is which: both stay on the point
                 continue
-            measured = self._measured_split(pts, int(p), 2.0 * off, named)
+            legs = (m, n) in ((LK, RK), (LA, RA))
+            measured = self._measured_split(pts, int(p), 2.0 * off, named,
+                                            cfg.split_legs_sigma_px if legs else cfg.split_sigma_px)
+            if measured is not None and legs:
+                if _angle_deg(measured, off) > cfg.split_legs_max_deg:
+                    measured = None  # legs one before the other: which knee is which end is a coin flip
+                else:
+                    # only its length along the guess: the part across it (one leg a little
+                    # before the other) has a sign no view tells, the guess's side does not either
+                    u = off / np.linalg.norm(off)
+                    measured = float(measured @ u) * u
             if measured is not None:
                 off = 0.5 * measured
             out[m] = out[m] + off
@@ -1289,30 +1302,36 @@ class Labeller:
         dist = self.pose_fit(cand)
         return tracked if float(dist[1]) < float(dist[0]) else lateral
 
-    def _measured_split(self, pts: Points3D, p: int, prior: np.ndarray, named: np.ndarray) -> np.ndarray | None:
+    def _measured_split(self, pts: Points3D, p: int, prior: np.ndarray, named: np.ndarray,
+                        sigma_px: float) -> np.ndarray | None:
         """The separation (3,) m of the two markers of point p from the moments of its merged
-        blobs, when every view saw it merged with measured moments, in blobs no other named point
-        (named: the points markers are named to) uses, and they are >= ``split_min_views`` (else
-        None: the point is not surely the two markers' midpoint, a blob holds a third marker, or
-        the views leave a direction unmeasured). prior (3,) m: the guess, sign included."""
+        blobs, when every view saw it merged (or in a blob of one marker's size whose moments
+        part two by >= ``PointsConfig.elongated_px``: the two overlap) with measured moments, in
+        blobs no other named point (named: the points markers are named to) uses, and they are
+        >= ``split_min_views`` (else None: the point is not surely the two markers' midpoint, a
+        blob holds a third marker, or the views leave a direction unmeasured). prior (3,) m: the
+        guess, sign included; sigma_px: the moments' noise (inf: None, not measured)."""
         cfg = self.config
-        if not np.isfinite(cfg.split_sigma_px):
+        if not np.isfinite(sigma_px):
             return None
         cams, seps = [], []
         for c, v in enumerate(self._views):
             b = int(pts.blob[c, p])
             if b < 0:
                 continue
-            if v.capacity[b] < 2 or not np.isfinite(v.moments[b]).all():
-                return None  # a view of one marker: the point is not the two markers' midpoint
+            if not np.isfinite(v.moments[b]).all():
+                return None
+            sep = blob_separation(v.moments[b])[0]
+            if v.capacity[b] < 2 and np.hypot(*sep) < self.points.config.elongated_px:
+                return None  # a view of one marker (not two overlapping): the point is not the two markers' midpoint
             if any(q != p and pts.blob[c, q] == b for q in named):
                 return None  # another named point's blob too: it holds more than these two
             cams.append(c)
-            seps.append(blob_separation(v.moments[b])[0])
+            seps.append(sep)
         if len(cams) < cfg.split_min_views:
             return None
         J = jacobians(lambda P: self.points.tri.project(P)[0], pts.X[p])[cams]
-        return separation_3d(J, np.array(seps), prior, cfg.split_sigma_px, cfg.split_prior_m)
+        return separation_3d(J, np.array(seps), prior, sigma_px, cfg.split_prior_m)
 
     def _named(self, pts: Points3D, labels: np.ndarray, facing: np.ndarray) -> np.ndarray:
         """(8, 3) markers at the points labels (8,) name (-1 = unnamed), a shared point split
@@ -1494,6 +1513,12 @@ def _guess_split(pred: np.ndarray, m: int, n: int, half: float, right: np.ndarra
     if not np.isfinite(norm) or norm < 1e-9:
         return None
     return off * min(1.0, half / norm)
+
+
+def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
+    """Angle (degrees, 0-180) between the vectors a, b (3,)."""
+    cos = float(a @ b) / max(float(np.linalg.norm(a) * np.linalg.norm(b)), 1e-12)
+    return float(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
 
 
 def _borrowed(pts: Points3D, points: np.ndarray, others: np.ndarray) -> np.ndarray:

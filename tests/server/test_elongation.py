@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from samba_common.calib import default_rig
-from samba_common.skeleton import MARKER_JOINT
+from samba_common.skeleton import BONE_TYPES, MARKER_JOINT
 from samba_common.wire import UNLABELLED, MarkerPacket, decode_packet, encode_packet
 from samba_mote.detect import DetectConfig, Detector
 from samba_mote.pipeline import MotePipeline
@@ -18,6 +18,7 @@ from samba_server.labelling import Labeller
 from samba_server.labelling.labeller import LabelConfig
 from samba_server.labelling.elongation import blob_separation, jacobians, separation_3d
 from samba_server.labelling.rigid import LA, LK, RA, RK
+from samba_server.recon.proportions import estimate_lengths
 
 FPS = 60.0
 
@@ -119,21 +120,51 @@ def _merging_packets(rig, markers, t, moments=True, radius_px=1.6, merge_px=4.5,
 @pytest.mark.parametrize("moments", [True, False])
 def test_merged_knees_and_ankles_of_a_hip_width_stance_are_placed_from_the_moments(moments):
     """Feet at hip width (20 cm) seen from 5 m: the knees merge in every view, and the ankles
-    too. With the measured split switched on (``split_sigma_px``; off by default) the four
-    markers are placed within 1.5 cm from the blobs' moments; without moments (a version-1
-    packet) the split is a guess, at most 8 cm either side of the merged point along the
-    subject's right: here 2 cm off each."""
+    too, in camera 1 in blobs of a single marker's area (the two overlap there; only the moments
+    show two). By default the knees and the ankles are split by the blobs' moments
+    (``split_legs_sigma_px``): the four markers within 1.5 cm, and the subject's hip width,
+    measured from them, within 1.5 cm. Without moments (a version-1 packet) the split is a
+    guess, at most 8 cm either side of the merged point along the subject's right: here 2 cm
+    off each, and the hip width 16 cm."""
     rig = default_rig(4)
-    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
-    lab = Labeller(rig, config=LabelConfig(split_sigma_px=0.5))
-    named = None
-    for i in range(20):
-        named, _q = lab.label(_merging_packets(rig, pose, i / FPS, moments), i / FPS)
+    hip = float(DEFAULT_LENGTHS[BONE_TYPES.index("hip_width")])
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", hip))[list(MARKER_JOINT)]
+    lab = Labeller(rig)
+    frames = []
+    for i in range(30):
+        named, _q = lab.label(_merging_packets(rig, pose, i / FPS, moments, small=(1,)), i / FPS)
+        frames.append(named)
     err = np.linalg.norm(named[[LK, RK, LA, RA]] - pose[[LK, RK, LA, RA]], axis=1)
+    width = estimate_lengths(np.array(frames), DEFAULT_LENGTHS)[BONE_TYPES.index("hip_width")]
     if moments:
         assert (err < 0.015).all(), err
+        assert width == pytest.approx(hip, abs=0.015)
     else:
         assert err.min() > 0.015, err
+        assert width < hip - 0.03
+
+
+def test_merged_knees_one_a_little_before_the_other_keep_only_the_split_along_the_subjects_right():
+    """Knees at hip width, the left 2 cm before the right (a step), merged in every view (blobs
+    merge up to 6 px here). The split takes the 20 cm across the body from the moments but not
+    the 4 cm front to back, whose sign no view tells (taken, it swapped a walk's knees): the
+    named knees lie 20 cm apart along the subject's right and level front to back, each within
+    the 2 cm it cannot know."""
+    rig = default_rig(4)
+    hip = float(DEFAULT_LENGTHS[BONE_TYPES.index("hip_width")])
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", hip))[list(MARKER_JOINT)]
+    pose[LK, 1] += 0.02
+    pose[RK, 1] -= 0.02
+    lab = Labeller(rig)
+    for i in range(20):
+        packets = _merging_packets(rig, pose, i / FPS, merge_px=6.0)
+        named, _q = lab.label(packets, i / FPS)
+    assert all(int((p.area == 18).sum()) == 2 for p in packets)  # knees and ankles merged in every view
+    sep = named[LK] - named[RK]
+    assert sep[0] == pytest.approx(pose[LK, 0] - pose[RK, 0], abs=0.01)
+    assert abs(sep[1]) < 0.005
+    err = np.linalg.norm(named[[LK, RK]] - pose[[LK, RK]], axis=1)
+    assert (err < 0.025).all(), err
 
 
 def test_a_marker_seen_only_merged_with_another_gets_a_point_on_the_blobs_far_ends():
