@@ -1249,10 +1249,10 @@ class Labeller:
         pairs opt-in (``split_sigma_px``). Two wrists (hands together) are split along their
         tracks' predictions, which carry the hands' last separation and motion (one above the
         other on a sword hilt, crossing over each other in a dance), and along the subject's
-        right only when those coincide: the names the hands part with come from this split. With two cameras the wrists' tracks are
-        too often on ghosts: :meth:`_wrists_split` chooses. out (8, 3) in place; assign (8,)
-        point per marker (-1: none); pred (8, 3) the markers' predictions; right (3,) the
-        subject's right or None."""
+        right only when those coincide: the names the hands part with come from this split.
+        With two cameras the wrists' tracks are too often on ghosts: :meth:`_wrists_split`
+        chooses. out (8, 3) in place; assign (8,) point per marker (-1: none); pred (8, 3) the
+        markers' predictions; right (3,) the subject's right or None."""
         cfg = self.config
         named = np.unique(assign[assign >= 0])
         for p in named:
@@ -1276,7 +1276,7 @@ class Labeller:
                     measured = None  # legs one before the other: which knee is which end is a coin flip
                 else:
                     # only its length along the guess: the part across it (one leg a little
-                    # before the other) has a sign no view tells, the guess's side does not either
+                    # before the other) has a sign that neither the views nor the guess tell
                     u = off / np.linalg.norm(off)
                     measured = float(measured @ u) * u
             if measured is not None:
