@@ -539,7 +539,7 @@ class Labeller:
             # unnamed, the other perhaps on a merged point between the knees) by as much as
             # the feet must fit better to be named crossed (cross_gain_m; with three cameras
             # or more, as that rule: with two, the 2-camera benchmark's unseen set lost 1.7 points)
-            crossed = [(lm, rm) for lm, rm in ((LK, RK), (LA, RA))
+            crossed = [(lm, rm) for lm, rm in _LEG_PAIRS
                        if assign[lm] >= 0 and assign[rm] >= 0 and assign[lm] != assign[rm]
                        and float((out[rm] - out[lm]) @ right) < -cfg.crossed_m]
             # both pairs crossed is a whole-leg swap, which keeps both shins: they cannot tell
@@ -1048,7 +1048,7 @@ class Labeller:
         if since is not None and t - since >= self.config.knees_crossed_s:
             log.debug("t=%.3f s: knees crossed for %.2f s: the legs' names swapped", t, t - since)
             self._knees_crossed_since = None
-            self._swap([(LK, RK), (LA, RA)], out, assign, arow)
+            self._swap(list(_LEG_PAIRS), out, assign, arow)
 
     def _swap(self, pairs: list[tuple[int, int]], *frame: np.ndarray) -> None:
         """Swap the names of each (m, n) marker pair: in the frame's arrays (out (8, 3), assign,
@@ -1127,7 +1127,7 @@ class Labeller:
             return False, False
         right = right_of(self._facing)
         out = []
-        for lm, rm in ((LK, RK), (LA, RA)):
+        for lm, rm in _LEG_PAIRS:
             recent = t - min(self._seen[lm], self._seen[rm]) <= cfg.crossed_memory_s
             known = recent and np.isfinite(self._pos[[lm, rm]]).all()
             out.append(bool(known and float((self._pos[rm] - self._pos[lm]) @ right) < -cfg.crossed_m))
@@ -1268,7 +1268,7 @@ class Labeller:
                 off = lateral if off is None else self._wrists_split(out, pred, lateral, off)
             if off is None:  # no way to tell which end is which: both stay on the point
                 continue
-            legs = (m, n) in ((LK, RK), (LA, RA))
+            legs = (m, n) in _LEG_PAIRS
             measured = self._measured_split(pts, int(p), 2.0 * off, named,
                                             cfg.split_legs_sigma_px if legs else cfg.split_sigma_px)
             if measured is not None and legs:
@@ -1576,17 +1576,20 @@ def _permutations(swaps: tuple[tuple[tuple[int, int], ...], ...]) -> np.ndarray:
     return out
 
 
+#: the two knees and the two ankles, (left, right) each
+_LEG_PAIRS = ((LK, RK), (LA, RA))
+
 #: the confusions :meth:`Labeller.refit` and (but for both legs at once) :meth:`Labeller._swap_to_fit`
 #: check, as (S, 8) marker orders: a wrist and its shoulder, the wrists, the knees, the ankles,
 #: the legs, a knee and its ankle, a wrist and the other shoulder, the mirror image; and (S, 8)
 #: the markers each one moves
 _FIT_SWAP_PAIRS = (
-    ((LS, LW),), ((RS, RW),), ((LW, RW),), ((LK, RK),), ((LA, RA),), ((LK, RK), (LA, RA)), ((LK, LA),),
+    ((LS, LW),), ((RS, RW),), ((LW, RW),), ((LK, RK),), ((LA, RA),), _LEG_PAIRS, ((LK, LA),),
     ((RK, RA),), ((LS, RW),), ((RS, LW),), ((LS, RS), (LW, RW), (LK, RK), (LA, RA)))
 _FIT_SWAPS = _permutations(_FIT_SWAP_PAIRS)
 _FIT_MOVES = _FIT_SWAPS != np.arange(N_MARKERS)
 _MIRROR = len(_FIT_SWAPS) - 1  #: the row of _FIT_SWAPS naming every marker for its other side
-_LEGS = _FIT_SWAP_PAIRS.index(((LK, RK), (LA, RA)))  #: the row naming each leg for the other
+_LEGS = _FIT_SWAP_PAIRS.index(_LEG_PAIRS)  #: the row naming each leg for the other
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
 #: a knee and the other leg's ankle (:meth:`Labeller._part`)
 _KNEE_OTHER_ANKLE = {(LK, RA), (RK, LA)}
