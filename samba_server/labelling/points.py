@@ -17,8 +17,10 @@ Per frame (:func:`reconstruct_points`):
    candidate whose blob is taken is kept from its other views when >= 2 are left and ranked
    again by them), and two accepted points are never closer than ``min_separation_m``; an
    accepted point seen by >= 4 views with an error above ``rough_px`` may be a ghost made of
-   two markers' blobs: the acceptance is run again without it and that outcome taken when it
-   explains as many blobs with a clearly smaller error (:meth:`PointReconstructor._unghost`);
+   two markers' blobs: the acceptance is run again without it, or with it split into two
+   points from two sets of its views (two markers each hidden from the views that see the
+   other), and that outcome taken when it explains as many blobs with a clearly smaller error
+   (:meth:`PointReconstructor._unghost`);
 5. a point seen only in merged blobs that each hold one other point (a marker hidden behind
    another wherever it is seen) lies at the two markers' midpoint: it is reflected through the
    other point (:meth:`PointReconstructor._mirror`);
@@ -278,8 +280,8 @@ class PointReconstructor:
         penalty = missing + 2 * far
         fresh = (X.copy(), err.copy(), n_views.copy(), blob.copy())  # before acceptance reduces candidates
         keep, capl = self._accept(penalty, views, ok, X, err, n_views, blob, uv)
-        keep, capl, X, err, n_views, blob = self._unghost(keep, capl, penalty, views, ok, (X, err, n_views, blob),
-                                                          fresh, uv, missing)
+        keep, capl, X, err, n_views, blob, uv, missing = self._unghost(keep, capl, penalty, views, ok,
+                                                                       (X, err, n_views, blob), fresh, uv, missing)
         cap = [np.array(c, np.int64) for c in capl]
         if not keep:
             return Points3D.empty(C)
@@ -683,23 +685,95 @@ class PointReconstructor:
         wrists. Without each such point the acceptance is run again (from the candidates as
         they were before it, ``fresh``: X, err, n_views, blob); the other outcome is taken when
         it uses as many blobs, leaves no more views unexplained and its points' errors sum at
-        least ``rough_px`` less. ``accepted``: X, err, n_views, blob after the first acceptance.
-        Returns keep, capl, X, err, n_views, blob."""
+        least ``rough_px`` less. When that fails, the acceptance is run again with the point
+        replaced by the two points of its views' split (:meth:`_split_rough`): two markers,
+        each hidden from the views that see the other, have no candidate of their own (each
+        one's pair of views is supported by the other's blobs and grows into the rough point).
+        ``accepted``: X, err, n_views, blob after the first acceptance; uv (C, K, 2), missing
+        (K,): the candidates' blobs and unexplained views. Returns keep, capl, X, err, n_views,
+        blob, uv, missing (the last four with the split's candidates appended when one was taken)."""
         cfg = self.config
         X, err, n_views, blob = accepted
         for s in sorted((k for k in keep if n_views[k] >= 4 and err[k] > cfg.rough_px), key=lambda k: -err[k]):
             if s not in keep:
                 continue
-            trial = tuple(a.copy() for a in fresh)
-            without = ok.copy()
-            without[s] = False
-            keep2, capl2 = self._accept(penalty, views, without, *trial, uv)
-            n2, e2 = trial[2], trial[1]
-            if n2[keep2].sum() >= n_views[keep].sum() and missing[keep2].sum() <= missing[keep].sum() \
-                    and e2[keep2].sum() <= err[keep].sum() - cfg.rough_px:
-                keep, capl, ok = keep2, capl2, without
-                X, err, n_views, blob = trial
-        return keep, capl, X, err, n_views, blob
+            tried = [(fresh, ok, penalty, uv, missing)]
+            split = self._split_rough(s, fresh, uv, views)
+            if split is not None:
+                Xn, en, nn, bn, uvn, mn = split
+                tried.append(((np.vstack([fresh[0], Xn]), np.r_[fresh[1], en], np.r_[fresh[2], nn],
+                               np.hstack([fresh[3], bn])), np.r_[ok, True, True], np.r_[penalty, mn],
+                              np.concatenate([uv, uvn], axis=1), np.r_[missing, mn]))
+            for cand, ok2, penalty2, uv2, missing2 in tried:
+                trial = tuple(a.copy() for a in cand)
+                without = ok2.copy()
+                without[s] = False
+                keep2, capl2 = self._accept(penalty2, views, without, *trial, uv2)
+                n2, e2 = trial[2], trial[1]
+                if n2[keep2].sum() >= n_views[keep].sum() and missing2[keep2].sum() <= missing[keep].sum() \
+                        and e2[keep2].sum() <= err[keep].sum() - cfg.rough_px:
+                    keep, capl, ok, penalty, uv, missing, fresh = keep2, capl2, without, penalty2, uv2, missing2, cand
+                    X, err, n_views, blob = trial
+                    break
+        return keep, capl, X, err, n_views, blob, uv, missing
+
+    def _split_rough(self, s: int, fresh: tuple, uv: np.ndarray, views: list[ViewBlobs]) -> tuple | None:
+        """Two candidates for the rough candidate s (>= 4 views): the split of its views into two
+        sets of >= 2 whose triangulations fit within ``rough_px`` together (the best such split)
+        and lie ``min_separation_m`` apart, when no view left out makes the rest fit within
+        ``rough_px`` (one marker with one bad view is not two markers), its blobs are all single
+        markers' and it has at most 6 views (at most 25 splits). Two ankles 7 cm apart,
+        each hidden by the other leg from the two cameras that see the other, project within
+        1-1.5 px of each other everywhere: the four views made one 4-view point between them
+        (0.66 px) and one ankle went unnamed for 0.7 s. fresh: X, err, n_views, blob of the
+        candidates; uv (C, K, 2) px. Returns the two candidates' X (2, 3), err (2,), n_views
+        (2,), blob (C, 2), uv (C, 2, 2) and unexplained views (2,), or None."""
+        cfg = self.config
+        blob = fresh[3]
+        cams = np.flatnonzero(blob[:, s] >= 0).tolist()
+        n = len(cams)
+        # merged blobs are _to_ends' and _unshare's; past 6 views the splits grow as 2^n (and so many
+        # views of two markers each hidden from half of them are unlikely)
+        if not 4 <= n <= 6 or any(views[c].capacity[blob[c, s]] > 1 for c in cams):
+            return None
+        for c in cams:
+            rest = self._triangulate_views(uv, s, [x for x in cams if x != c])
+            if rest.n_views[0] == n - 1 and rest.error[0] <= cfg.rough_px:
+                return None
+        best = None
+        for size in range(2, n - 1):
+            for a in itertools.combinations(cams, size):
+                if a[0] != cams[0]:  # each split once
+                    continue
+                b = [c for c in cams if c not in a]
+                ra, rb = self._triangulate_views(uv, s, list(a)), self._triangulate_views(uv, s, b)
+                if ra.n_views[0] != len(a) or rb.n_views[0] != len(b):
+                    continue
+                P = np.vstack([ra.points, rb.points])
+                e = float(ra.error[0] + rb.error[0])
+                if e <= cfg.rough_px and self.plausible(P).all() \
+                        and np.linalg.norm(P[0] - P[1]) >= cfg.min_separation_m and (best is None or e < best[0]):
+                    best = (e, P, np.array([ra.error[0], rb.error[0]]), (list(a), b))
+        if best is None:
+            return None
+        _, P, e2, sets = best
+        C = self.C
+        bn = np.full((C, 2), -1, np.int64)
+        uvn = np.full((C, 2, 2), np.nan)
+        for i, own in enumerate(sets):
+            bn[own, i] = blob[own, s]
+            uvn[own, i] = uv[own, s]
+        # unexplained views: inside the image with no blob within support_px (a merged blob's radius more)
+        proj, depth = self.tri.project(P)  # (C, 2, 2), (C, 2)
+        mn = np.zeros(2, np.int64)
+        for c, v in enumerate(views):
+            inside = (depth[c] > 0.1) & (proj[c] >= 0).all(axis=1) & (proj[c] <= self.last_px[c]).all(axis=1)
+            if len(v):
+                extra = np.where(v.capacity > 1, cfg.merged_px_per_radius * v.radius, 0.0)
+                d = (np.linalg.norm(proj[c][:, None, :] - v.uv[None], axis=2) - extra[None]).min(axis=1)
+                inside &= ~(d <= cfg.support_px)
+            mn += inside & (bn[c] < 0)
+        return P, e2, np.array([len(sets[0]), len(sets[1])], np.int64), bn, uvn, mn
 
     def _triangulate_views(self, uv: np.ndarray, k: int, cams: list[int]) -> TriangulationResult:
         """Candidate k triangulated from the views ``cams`` only (uv: (C, K, 2) px of the
