@@ -641,7 +641,7 @@ def test_two_wrists_lined_up_in_other_views_are_not_made_one_ghost(rough_px):
 
 @pytest.mark.parametrize("case", ["single", "check off", "merged"])
 def test_two_ankles_each_hidden_from_the_views_that_see_the_other_are_two_points(case):
-    """Blobs of a rendered take (a dance, feet together, traced): the ankles are 7 cm apart and
+    """Blobs of a rendered take (dribbling with the feet together, traced): the ankles are 7 cm apart and
     project within 1.1-1.8 px of each other in every view; the right leg hides the left ankle
     from cameras 0 and 1, the left leg the right ankle from cameras 2 and 3, so each view has one
     single-sized blob there. Each ankle's pair of views is supported by the other ankle's blobs
