@@ -182,7 +182,7 @@ class PointReconstructor:
         cfg, C = self.config, self.C
         xy = self._normalised(views)
         hom = [np.concatenate([x, np.ones((len(x), 1))], axis=1) for x in xy]
-        extra = [np.where(v.capacity > 1, cfg.merged_px_per_radius * v.radius, 0.0) for v in views]
+        extra = [self._merged_extra(v) for v in views]
         cand_a: list[np.ndarray] = []
         cand_b: list[np.ndarray] = []
         cand_cams: list[tuple[int, int]] = []
@@ -230,7 +230,7 @@ class PointReconstructor:
         # between two markers) it still explains the view, the marker is in it, not missing
         in_merged = np.zeros((C, K), bool)
         proj, depth = self.tri.project(X)  # (C, K, 2), (C, K)
-        inside = (depth > 0.1) & (proj >= 0).all(axis=2) & (proj <= self.last_px).all(axis=2)
+        inside = self._inside(proj, depth)
         for c in range(C):
             v = views[c]
             if len(v) == 0:
@@ -697,14 +697,7 @@ class PointReconstructor:
         for s in sorted((k for k in keep if n_views[k] >= 4 and err[k] > cfg.rough_px), key=lambda k: -err[k]):
             if s not in keep:
                 continue
-            tried = [(fresh, ok, penalty, uv, missing)]
-            split = self._split_rough(s, fresh, uv, views)
-            if split is not None:
-                Xn, en, nn, bn, uvn, mn = split
-                tried.append(((np.vstack([fresh[0], Xn]), np.r_[fresh[1], en], np.r_[fresh[2], nn],
-                               np.hstack([fresh[3], bn])), np.r_[ok, True, True], np.r_[penalty, mn],
-                              np.concatenate([uv, uvn], axis=1), np.r_[missing, mn]))
-            for cand, ok2, penalty2, uv2, missing2 in tried:
+            for cand, ok2, penalty2, uv2, missing2 in self._without(s, fresh, ok, penalty, uv, missing, views):
                 trial = tuple(a.copy() for a in cand)
                 without = ok2.copy()
                 without[s] = False
@@ -716,6 +709,29 @@ class PointReconstructor:
                     X, err, n_views, blob = trial
                     break
         return keep, capl, X, err, n_views, blob, uv, missing
+
+    def _without(self, s: int, fresh: tuple, ok: np.ndarray, penalty: np.ndarray, uv: np.ndarray,
+                 missing: np.ndarray, views: list[ViewBlobs]):
+        """The candidate sets to run the acceptance again on for the rough point s (its own
+        candidate left out by the caller): the candidates as they are, then (only asked for when
+        that outcome was not taken) with the two points of its split appended
+        (:meth:`_split_rough`). Yields (X, err, n_views, blob), ok, penalty, uv, missing."""
+        yield fresh, ok, penalty, uv, missing
+        split = self._split_rough(s, fresh, uv, views)
+        if split is not None:
+            Xn, en, nn, bn, uvn, mn = split
+            yield ((np.vstack([fresh[0], Xn]), np.r_[fresh[1], en], np.r_[fresh[2], nn], np.hstack([fresh[3], bn])),
+                   np.r_[ok, True, True], np.r_[penalty, mn], np.concatenate([uv, uvn], axis=1), np.r_[missing, mn])
+
+    def _inside(self, proj: np.ndarray, depth: np.ndarray) -> np.ndarray:
+        """(C, K) bool: projections proj (C, K, 2) px at depth (C, K) m more than 0.1 m in front of
+        their camera and inside its image."""
+        return (depth > 0.1) & (proj >= 0).all(axis=2) & (proj <= self.last_px).all(axis=2)
+
+    def _merged_extra(self, view: ViewBlobs) -> np.ndarray:
+        """(N,) px: the extra matching tolerance of each blob of view, ``merged_px_per_radius``
+        times its radius for a merged one (its centroid lies between two markers), 0 otherwise."""
+        return np.where(view.capacity > 1, self.config.merged_px_per_radius * view.radius, 0.0)
 
     def _split_rough(self, s: int, fresh: tuple, uv: np.ndarray, views: list[ViewBlobs]) -> tuple | None:
         """Two candidates for the rough candidate s (>= 4 views): the split of its views into two
@@ -765,14 +781,12 @@ class PointReconstructor:
             uvn[own, i] = uv[own, s]
         # unexplained views: inside the image with no blob within support_px (a merged blob's radius more)
         proj, depth = self.tri.project(P)  # (C, 2, 2), (C, 2)
-        mn = np.zeros(2, np.int64)
+        unexplained = self._inside(proj, depth) & (bn < 0)  # (C, 2)
         for c, v in enumerate(views):
-            inside = (depth[c] > 0.1) & (proj[c] >= 0).all(axis=1) & (proj[c] <= self.last_px[c]).all(axis=1)
             if len(v):
-                extra = np.where(v.capacity > 1, cfg.merged_px_per_radius * v.radius, 0.0)
-                d = (np.linalg.norm(proj[c][:, None, :] - v.uv[None], axis=2) - extra[None]).min(axis=1)
-                inside &= ~(d <= cfg.support_px)
-            mn += inside & (bn[c] < 0)
+                d = (np.linalg.norm(proj[c][:, None, :] - v.uv[None], axis=2) - self._merged_extra(v)[None]).min(axis=1)
+                unexplained[c] &= ~(d <= cfg.support_px)
+        mn = unexplained.sum(axis=0).astype(np.int64)
         return P, e2, np.array([len(sets[0]), len(sets[1])], np.int64), bn, uvn, mn
 
     def _triangulate_views(self, uv: np.ndarray, k: int, cams: list[int]) -> TriangulationResult:
