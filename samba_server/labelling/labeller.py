@@ -631,7 +631,10 @@ class Labeller:
         stands for, where two views each hold a blob near the marker's projection (a hand in front
         of the chest hidden from two cameras: the other two see it, but a point of the knee behind
         it, seen in three views, took its blob in one of them). The two blobs, at least one used
-        by no point, are triangulated; the point is taken when it meets both rays within
+        by no point, or both used by unnamed 2-view points only (two shoulders seen by the same
+        two cameras on one epipolar plane of theirs: the points stage paired each one's blob
+        with the other's, two ghosts 40-50 cm off, and both shoulders went unnamed), are
+        triangulated; the point is taken when it meets both rays within
         ``rescue_px`` (a marker's own two blobs meet within 0.25 px; a blob pair that only
         happens to lie near the prediction mostly does not), lies within ``rescue_m`` of the
         prediction and by that much nearer it than any other marker's, is no other point and lies
@@ -657,6 +660,11 @@ class Labeller:
         tri = self.points.tri
         proj, depth = tri.project(pred[todo])  # (C, M, 2) px, (C, M) m
         taken = [set(pts.blob[c][pts.blob[c] >= 0].tolist()) for c in range(C)]
+        # blobs held by a point other than an unnamed 2-view one (which may be the crossed
+        # pairing of two markers' blobs in the same two views: a ghost of each)
+        ghostly = pts.n_views == 2
+        ghostly[assign[assign >= 0]] = False
+        held = [set(pts.blob[c][(pts.blob[c] >= 0) & ~ghostly].tolist()) for c in range(C)]
         found = 0
         for i, m in enumerate(todo):
             near: list[list[int]] = []
@@ -668,7 +676,8 @@ class Labeller:
                 dist = np.linalg.norm(v.uv - proj[c, i], axis=1)
                 near.append(np.flatnonzero(dist <= r).tolist())
             combos = [(a, b, ba, bb) for a, b in itertools.combinations(range(C), 2)
-                      for ba in near[a] for bb in near[b] if ba not in taken[a] or bb not in taken[b]]
+                      for ba in near[a] for bb in near[b]
+                      if ba not in taken[a] or bb not in taken[b] or (ba not in held[a] and bb not in held[b])]
             if not combos:
                 continue
             uv = np.full((C, len(combos), 2), np.nan)
