@@ -26,12 +26,13 @@ FPS = 60.0
 CMU_MEAN = np.array([0.367, 0.194, 0.496, 0.143, 0.252, 0.257, 0.477, 0.498])
 
 
-def _packets(rig, markers, t, rng, labels=None, distractors=None, noise_px=0.1):
-    """One MarkerPacket per camera: the markers (8, 3) projected (NaN rows unseen), area 9 px,
-    labelled with ``labels`` (8,) per camera or unlabelled, plus static distractor pixels."""
+def _packets(rig, markers, t, rng, labels=None, distractors=None, noise_px=0.1, hidden=None):
+    """One MarkerPacket per camera: the markers (8, 3) projected (NaN rows unseen; ``hidden``
+    (C, 8) bool: unseen by that camera), area 9 px, labelled with ``labels`` (8,) per camera or
+    unlabelled, plus static distractor pixels."""
     out = []
     for c, cam in enumerate(rig.cameras):
-        seen = np.isfinite(markers).all(axis=1)
+        seen = np.isfinite(markers).all(axis=1) & (True if hidden is None else ~np.asarray(hidden[c], bool))
         uv = cam.project(np.where(seen[:, None], markers, 0.0))[seen] + rng.normal(0, noise_px, (int(seen.sum()), 2))
         lab = np.full(len(uv), UNLABELLED, np.uint8) if labels is None else np.asarray(labels[c], np.uint8)[seen]
         if distractors is not None:
@@ -1613,18 +1614,11 @@ def test_a_hand_in_front_of_a_shoulder_keeps_its_name_when_the_shoulder_takes_it
     lab = Labeller(rig, config=LabelConfig(rescue_m=rescue_m))
     rng = np.random.default_rng(5)
     got = []
+    hidden = np.zeros((len(rig), 8), bool)
+    hidden[2:, LW] = True  # the body hides the hand from cam2 and cam3 ...
+    hidden[0, RS] = True  # ... and the hand the shoulder from cam0
     for i, m in enumerate(frames):
-        packets = []
-        for c, cam in enumerate(rig.cameras):
-            seen = np.ones(8, bool)
-            if i >= 89:
-                seen[LW] = c in (0, 1)  # the body hides the hand from cam2 and cam3 ...
-                seen[RS] = c != 0  # ... and the hand the shoulder from cam0
-            uv = cam.project(m[seen]) + rng.normal(0, 0.1, (int(seen.sum()), 2))
-            packets.append(MarkerPacket(cam.name, 0, int(i / FPS * 1e9), 160, 120, 100,
-                                        np.full(len(uv), UNLABELLED, np.uint8), uv.astype(np.float32),
-                                        np.full(len(uv), 9, np.uint16), np.zeros(len(uv), np.uint8)))
-        got.append(lab.label(packets, i / FPS)[0])
+        got.append(lab.label(_packets(rig, m, i / FPS, rng, hidden=hidden if i >= 89 else None), i / FPS)[0])
     got = np.array(got)
     truth = np.array(frames)
     # the setting is as described: the shoulder's point took the hand's blob in cam0
@@ -1680,18 +1674,10 @@ def test_shoulders_whose_blobs_the_points_stage_paired_crossed_are_named_from_th
 
     lab.points.reconstruct = cross_pairs
     rng = np.random.default_rng(5)
-    got = []
-    for i in range(60):
-        packets = []
-        for c, cam in enumerate(rig.cameras):
-            seen = np.ones(8, bool)
-            if i >= 40 and c in (2, 3):
-                seen[[LS, RS]] = False
-            uv = cam.project(pose[seen]) + rng.normal(0, 0.1, (int(seen.sum()), 2))
-            packets.append(MarkerPacket(cam.name, 0, int(i / FPS * 1e9), 160, 120, 100,
-                                        np.full(len(uv), UNLABELLED, np.uint8), uv.astype(np.float32),
-                                        np.full(len(uv), 9, np.uint16), np.zeros(len(uv), np.uint8)))
-        got.append(lab.label(packets, i / FPS)[0])
+    hidden = np.zeros((len(rig), 8), bool)
+    hidden[2:, [LS, RS]] = True
+    got = [lab.label(_packets(rig, pose, i / FPS, rng, hidden=hidden if i >= 40 else None), i / FPS)[0]
+           for i in range(60)]
     assert len(crossed) == 20 and min(crossed) > 0.2  # the setting: ghosts far from both shoulders
     got = np.array(got)
     truth = np.repeat(pose[None], 60, axis=0)
