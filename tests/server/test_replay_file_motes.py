@@ -62,11 +62,19 @@ def _replay_server(take_path, configs) -> Server:
                   label_config=configs.labelling)
 
 
-def _same(a: list, b: list) -> None:
+def _same(a: list, b: list, servers: tuple = ()) -> None:
+    """Poses ``a`` and ``b`` equal frame by frame; a failure names the frames that differ with
+    their views, markers and flags, and the servers' per-mote sync counters (``servers``)."""
     assert len(a) == len(b)
     ja, jb = np.stack([p.joints for p in a]), np.stack([p.joints for p in b])
-    np.testing.assert_array_equal(np.isnan(ja), np.isnan(jb))
-    np.testing.assert_allclose(np.nan_to_num(ja), np.nan_to_num(jb), atol=1e-9, rtol=0)
+    diff = ~np.isclose(np.nan_to_num(ja), np.nan_to_num(jb), atol=1e-9, rtol=0).all(axis=(1, 2))
+    diff |= (np.isnan(ja) != np.isnan(jb)).any(axis=(1, 2))
+    if diff.any():
+        frames = [(int(i), [(p.n_views, p.n_markers, p.flags) for p in (a[i], b[i])]) for i in np.nonzero(diff)[0][:5]]
+        sync = [{m: (st.received, st.late, st.duplicate, st.missing) for m, st in srv.sync.motes.items()}
+                for srv in servers]
+        raise AssertionError(f"{int(diff.sum())} of {len(a)} poses differ; first (frame, [(views, markers, flags) "
+                             f"a, b]): {frames}; sync (received, late, duplicate, missing) per server: {sync}")
     assert [p.t_ns - a[0].t_ns for p in a] == [p.t_ns - b[0].t_ns for p in b]
 
 
@@ -93,7 +101,7 @@ def test_file_motes_live_replay_and_max_speed(tmp_path, file_take) -> None:
     # samba-replay --out: exactly the live poses (frames whose solve live skipped are skipped again)
     rep = _replay_server(take_path, configs)
     replay_into(rep, take_path)
-    _same(live, rep.poses)
+    _same(live, rep.poses, (server, rep))
 
     # samba-replay --speed max --connect: a second live server gets every frame, grouped as recorded,
     # and solves them all (equal to an in-process replay that skips nothing)
@@ -105,7 +113,7 @@ def test_file_motes_live_replay_and_max_speed(tmp_path, file_take) -> None:
     assert server.skip_seqs is None and server2.skip_seqs is not None  # live motes vs a replay (see below)
     ref = _replay_server(take_path, configs)
     replay_into(ref, take_path, solve_all=True)  # samba-replay --out --solve-all: without the recorded skips
-    _same(ref.poses, server2.poses)
+    _same(ref.poses, server2.poses, (ref, server2))
     assert sum(p.solved for p in server2.poses) >= sum(p.solved for p in live)
 
 
