@@ -63,8 +63,9 @@ class LabelConfig:
     merged_m: float = 0.02  #: a point seen in a merged blob costs this much more
     unexplained_m: float = 0.03  #: a 2-view point costs this much more per view that should have seen it
     merged_half_m: float = 0.08  #: two markers in one merged point lie at most this far either side of it (the guess; see split_sigma_px)
-    split_sigma_px: float = float("inf")  #: noise of the separation a merged blob's moments measure, to split two markers on one point by it, but the knees or the ankles (inf: off, the default: see docs/labelling.md; 0.5 on the simulator's blobs)
+    split_sigma_px: float = float("inf")  #: noise of the separation a merged blob's moments measure, to split two markers on one point by it, but the knees, the ankles or the wrists (inf: off, the default: see docs/labelling.md; 0.5 on the simulator's blobs)
     split_legs_sigma_px: float = 0.5  #: the same for the two knees or the two ankles (inf: off; on by default: the hip width the subject is measured with comes from them) ...
+    split_wrists_sigma_px: float = 0.5  #: the same for the two wrists (hands together), the sign from their tracks' separation (inf: off)
     split_legs_max_deg: float = 35.0  #: ... used only this close in direction to the guess (the subject's right): further off, the guess cannot tell which end is which
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
@@ -1254,11 +1255,13 @@ class Labeller:
         """Markers named to the same (merged) point: place them either side of it, by the guess
         of :func:`_guess_split`, or by their separation measured from the merged blobs' moments
         (:meth:`_measured_split`, that guess as its prior): the two knees or the two ankles
-        (``split_legs_sigma_px``) where it lies within ``split_legs_max_deg`` of the guess, other
-        pairs opt-in (``split_sigma_px``). Two wrists (hands together) are split along their
-        tracks' predictions, which carry the hands' last separation and motion (one above the
-        other on a sword hilt, crossing over each other in a dance), and along the subject's
-        right only when those coincide: the names the hands part with come from this split.
+        (``split_legs_sigma_px``) where it lies within ``split_legs_max_deg`` of the guess, the two
+        wrists (``split_wrists_sigma_px``), other pairs opt-in (``split_sigma_px``). Two wrists
+        (hands together) are guessed along their tracks' predictions, which carry the hands' last
+        separation and motion (one above the other on a sword hilt, crossing over each other in a
+        dance), and along the subject's right only when those coincide; the moments then measure
+        the separation, that guess giving its sign, so a turning hilt is followed frame by frame:
+        the names the hands part with come from this split.
         With two cameras the wrists' tracks are too often on ghosts: :meth:`_wrists_split`
         chooses. out (8, 3) in place; assign (8,) point per marker (-1: none); pred (8, 3) the
         markers' predictions; right (3,) the subject's right or None."""
@@ -1279,7 +1282,8 @@ class Labeller:
                 continue
             legs = (m, n) in _LEG_PAIRS
             measured = self._measured_split(pts, int(p), 2.0 * off, named,
-                                            cfg.split_legs_sigma_px if legs else cfg.split_sigma_px)
+                                            cfg.split_legs_sigma_px if legs else
+                                            cfg.split_wrists_sigma_px if wrists else cfg.split_sigma_px)
             if measured is not None and legs:
                 if _angle_deg(measured, off) > cfg.split_legs_max_deg:
                     measured = None  # legs one before the other: which knee is which end is a coin flip
