@@ -159,7 +159,7 @@ from samba_common.skeleton import N_MARKERS
 from .labelling import bit_markers, marker_bits
 from .labelling.labeller import facing_of
 from .labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW, SIDES
-from .recon.bounds import mirrored_legs, widened
+from .recon.bounds import mirrored_legs, mirrored_wrists, widened
 from .recon.reconstruct import solve_both_ways
 from .server import Server, ServerConfig
 
@@ -170,7 +170,7 @@ _UPPER = (1 << LS) | (1 << RS) | (1 << LW) | (1 << RW)
 _LEGS = (1 << LK) | (1 << RK) | (1 << LA) | (1 << RA)
 
 __all__ = ["PassResult", "backward_pass", "choose", "disputed_m", "end_facing", "legs_unsure_of", "loose_of",
-           "relabel_both_ways"]
+           "relabel_both_ways", "unseparated_of"]
 
 #: m (LabelQuality.margin_m, 0.1 m per identification score unit): an identification whose
 #: best labelling beat the runner-up by less than this was a coin flip (after a blackout the
@@ -232,7 +232,8 @@ class PassResult:
     (F, 8) bool, the named markers whose position is rough (:meth:`Labeller.loose`; None: none);
     residual: (F,) m, the pass's own solve of its names (rms marker fit; NaN unsolved; None:
     not known); legs_unsure: (F,) bool, frames whose leg names may be each other's
-    (:attr:`Labeller.legs_unsure`; None: not known)."""
+    (:attr:`Labeller.legs_unsure`; None: not known); unseparated: (F, 8) bool, the named wrists
+    no view saw apart (:meth:`Labeller.unseparated`; None: none)."""
 
     markers: np.ndarray
     renamed: np.ndarray
@@ -241,6 +242,7 @@ class PassResult:
     loose: np.ndarray | None = None
     residual: np.ndarray | None = None
     legs_unsure: np.ndarray | None = None
+    unseparated: np.ndarray | None = None
 
 
 def _standard_pose_clear(identified: np.ndarray | None) -> np.ndarray | None:
@@ -298,7 +300,8 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
                   tri_config=server.triangulator.config, label_config=label_config)
     F = len(t)
     out = PassResult(np.full((F, N_MARKERS, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan),
-                     np.full(F, np.nan), np.zeros((F, N_MARKERS), bool), np.full(F, np.nan), np.zeros(F, bool))
+                     np.full(F, np.nan), np.zeros((F, N_MARKERS), bool), np.full(F, np.nan), np.zeros(F, bool),
+                     np.zeros((F, N_MARKERS), bool))
     t_end = float(t[-1]) if F else 0.0
     for k in range(F - 1, -1, -1):
         tb = t_end - float(t[k])  # backwards time runs forwards
@@ -306,6 +309,7 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
         markers, _joints, out.residual[k], _bounds = twin.solve_markers(markers, tb)
         out.markers[k], out.margin[k], out.renamed[k] = markers, q.margin_m, q.renamed
         out.loose[k] = twin.labeller.loose(markers)
+        out.unseparated[k] = twin.labeller.unseparated(markers)
         out.legs_unsure[k] = twin.labeller.legs_unsure
         if q.mode == "identified":
             out.identified[k] = q.margin_m
@@ -794,13 +798,33 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
 def loose_of(markers: np.ndarray, fwd: PassResult, bwd: PassResult) -> np.ndarray | None:
     """(F, 8) bool: the chosen names markers (F, 8, 3) whose position is rough, as the pass that
     named the marker at that point said (``PassResult.loose``); None when neither pass says."""
-    if fwd.loose is None and bwd.loose is None:
+    return _as_named(markers, (fwd.markers, fwd.loose), (bwd.markers, bwd.loose))
+
+
+def unseparated_of(markers: np.ndarray, fwd: PassResult, bwd: PassResult) -> np.ndarray:
+    """(F, 8) bool: the chosen names markers (F, 8, 3) that no view saw apart, as the pass that
+    named the marker at that point said (``PassResult.unseparated``), where both wrists are
+    so: the pair is output unnamed (:func:`relabel_both_ways`)."""
+    out = _as_named(markers, (fwd.markers, fwd.unseparated), (bwd.markers, bwd.unseparated))
+    if out is None:
+        return np.zeros(markers.shape[:2], bool)
+    pair = out[:, [LW, RW]].all(axis=1)
+    out[:] = False
+    out[pair, LW] = out[pair, RW] = True
+    return out
+
+
+def _as_named(markers: np.ndarray, *passes: tuple[np.ndarray, np.ndarray | None]) -> np.ndarray | None:
+    """(F, 8) bool: per chosen marker of markers (F, 8, 3), the flag (F, 8) of the pass (its
+    markers (F, 8, 3), its flags or None) that named the marker at that point, the first pass's
+    word where several did; None when no pass has flags."""
+    if all(flags is None for _m, flags in passes):
         return None
     out = np.zeros(markers.shape[:2], bool)
-    for p in (bwd, fwd):  # the forward pass's word where both name the point
-        if p.loose is not None:
-            at = _within(markers, p.markers, 1e-6)
-            out[at] = p.loose[at]
+    for named, flags in reversed(passes):
+        if flags is not None:
+            at = _within(markers, named, 1e-6)
+            out[at] = flags[at]
     return out
 
 
@@ -822,13 +846,22 @@ def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: P
     # cameras, 14 takes of the benchmark's saved passes: 1116 -> 1161 frames not all right)
     markers, take_b = choose(fwd, bwd, t, picked_up=len(server.rig) >= 3, fit=len(server.rig) >= 3)
     log.info("two-way labelling: %d of %d frames named from the backward pass", int(take_b.sum()), len(t))
-    joints, results = solve_both_ways(server.reconstructor.again(), markers, t, loose=loose_of(markers, fwd, bwd))
+    # hands together no view separates: solved loosely, output unnamed (a gap, not a coin flip)
+    gap = unseparated_of(markers, fwd, bwd)
+    loose = loose_of(markers, fwd, bwd)
+    loose = gap if loose is None else loose | gap
+    joints, results = solve_both_ways(server.reconstructor.again(), markers, t, loose=loose)
     bounds = np.array([r.bounds for r in results], float).reshape(len(t), -1)
+    if gap.any():
+        log.info("two-way labelling: both wrists left unnamed on %d frames (no view saw them apart)",
+                 int(gap[:, LW].sum()))
+    markers = np.where(gap[:, :, None], np.nan, markers)
     extra = {"markers": markers, "residual": np.array([r.residual for r in results], float),
              "n_markers": np.isfinite(markers).all(axis=2).sum(axis=1),
              "label_margin": np.where(take_b, bwd.margin, fwd.margin), "from_backward": take_b,
-             "legs_unsure": legs_unsure_of(markers, fwd, bwd)}
-    extra["joint_bound"] = mirrored_legs(widened(bounds, disputed_m(fwd, bwd)), joints, extra["legs_unsure"])
+             "legs_unsure": legs_unsure_of(markers, fwd, bwd), "wrists_unseparated": gap[:, LW]}
+    extra["joint_bound"] = mirrored_wrists(mirrored_legs(widened(bounds, disputed_m(fwd, bwd)), joints,
+                                                         extra["legs_unsure"]), joints, gap[:, LW])
     return joints, extra
 
 

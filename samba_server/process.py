@@ -76,7 +76,9 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     and extras: markers (F, 8, 3), residual (F,), n_markers (F,), label_margin (F,) metres,
     joint_bound (F, 13) m, legs_unsure (F,) bool (the legs' names may be each other's:
     :attr:`~samba_server.labelling.Labeller.legs_unsure`; the knees' and ankles' bounds cover
-    it); with both_ways also from_backward (F,) bool and live: the forward pass's joints,
+    it), wrists_unseparated (F,) bool (both wrists left unnamed: no view saw them apart,
+    :meth:`~samba_server.labelling.Labeller.unseparated`; the wrists' and elbows' bounds cover
+    either naming); with both_ways also from_backward (F,) bool and live: the forward pass's joints,
     markers and bounds (a dict).
     """
     from samba_common.wire import encode_packet
@@ -98,13 +100,16 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     rig_index = [server.rig.names.index(n) for n in names]
     kept: list[list] = []  # per frame, per rig camera: the packet (both_ways)
     # pose seq -> the markers its labelling renamed, its identification's margin (NaN: tracked),
-    # its markers whose position is rough, and whether its legs' names may be each other's
-    labelled_by_seq: dict[int, tuple[int, float, np.ndarray, bool]] = {}
+    # its markers whose position is rough, whether its legs' names may be each other's, its
+    # wrists no view saw apart (output unnamed) and its names before that (the two-way pass's)
+    labelled_by_seq: dict[int, tuple[int, float, np.ndarray, bool, np.ndarray, np.ndarray]] = {}
 
     def note_renamed(msg) -> None:  # runs right after its frame was labelled: the last quality is that frame's
         q = server.labeller.last_quality
+        named = np.array(server.last_named, float)
         labelled_by_seq[msg.seq] = (q.renamed, q.margin_m if q.mode == "identified" else float("nan"),
-                                    server.labeller.loose(np.asarray(msg.markers, float)), server.labeller.legs_unsure)
+                                    server.labeller.loose(named), server.labeller.legs_unsure,
+                                    server.labeller.unseparated(named), named)
 
     server.pose_listeners.append(note_renamed)  # (legs_unsure is output one-pass too)
     i = 0
@@ -136,7 +141,8 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     server.pose_listeners.remove(note_renamed)
     n_frames = max(i, n_frames)
     joints = np.full((n_frames, 13, 3), np.nan)
-    markers = np.full((n_frames, 8, 3), np.nan)
+    markers = np.full((n_frames, 8, 3), np.nan)  # as output (live: unseparated wrists unnamed)
+    named = np.full((n_frames, 8, 3), np.nan)  # as labelled
     residual = np.full(n_frames, np.nan)
     margin = np.full(n_frames, np.nan)
     n_markers = np.zeros(n_frames, int)
@@ -145,6 +151,7 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     identified = np.full(n_frames, np.nan)
     loose = np.zeros((n_frames, 8), bool)
     legs_unsure = np.zeros(n_frames, bool)
+    unseparated = np.zeros((n_frames, 8), bool)
     t_live = np.arange(n_frames) / fps  # the server's own frame times (s since its first frame)
     t0_ns = server.poses[0].t_ns if server.poses else base
     for p in server.poses:
@@ -154,18 +161,19 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
             margin[k] = p.label_margin_m
             if p.joint_bound is not None:
                 bound[k] = p.joint_bound
-            renamed[k], identified[k], loose[k], legs_unsure[k] = labelled_by_seq.get(p.seq,
-                                                                                      (0, np.nan, loose[k], False))
+            renamed[k], identified[k], loose[k], legs_unsure[k], unseparated[k], named[k] = labelled_by_seq.get(
+                p.seq, (0, np.nan, loose[k], False, unseparated[k], p.markers))
             t_live[k] = (p.t_ns - t0_ns) / 1e9
     t = np.arange(n_frames) / fps
     extra = {"markers": markers, "residual": residual, "n_markers": n_markers, "label_margin": margin,
-             "joint_bound": bound, "legs_unsure": legs_unsure}
+             "joint_bound": bound, "legs_unsure": legs_unsure, "wrists_unseparated": unseparated.any(axis=1)}
     if both_ways:
         from .both_ways import PassResult, relabel_both_ways
 
         kept += [[None] * len(server.rig.names) for _ in range(n_frames - len(kept))]
         again = relabel_both_ways(server, kept[:n_frames], t_live,
-                                  PassResult(markers, renamed, margin, identified, loose, residual, legs_unsure),
+                                  PassResult(named, renamed, margin, identified, loose, residual, legs_unsure,
+                                             unseparated),
                                   progress)
         if again is not None:
             live = {"joints": joints, "markers": markers, "joint_bound": bound}

@@ -30,7 +30,7 @@ from samba_common.wire import PacketError, decode_packet
 
 from .record import Recorder
 from .labelling import LabelConfig, Labeller, LabelQuality, marker_bits
-from .recon.bounds import mirrored_legs
+from .recon.bounds import mirrored_legs, mirrored_wrists
 from .sync import FrameSync, SyncConfig, SyncPacket
 from .triangulate import TriangulateConfig, Triangulator
 
@@ -117,6 +117,9 @@ class Server:
         self.packet_listeners: list[Callable] = []
         #: callables(PoseMessage) called with every pose after ``publish``
         self.pose_listeners: list[Callable] = []
+        #: (8, 3) world m: the last frame's names before the output left unseparated wrists
+        #: unnamed (:meth:`Labeller.unseparated`); what the solver and samba-process's two-way pass use
+        self.last_named = np.full((8, 3), np.nan)
         #: replay: pose seqs whose solve the live server skipped (recorded FLAG_SOLVE_SKIPPED).
         #: When set (a replay), the recording's decisions replace the wall-clock ones: the lag
         #: test, and the idle release of frames (see :meth:`process_pending`)
@@ -341,6 +344,13 @@ class Server:
             if np.isfinite(joints).all():
                 flags |= FLAG_SOLVED
                 self.stats.solved += 1
+        self.last_named = markers
+        gap = self.labeller.unseparated(markers)  # hands together no view separates: a gap, not a coin flip
+        if gap.any():
+            markers = np.where(gap[:, None], np.nan, markers)
+            mask = marker_bits(np.isfinite(markers).all(axis=1))
+            if bounds is not None:
+                bounds = mirrored_wrists(bounds, joints, True)
         if not frame.complete:
             flags |= FLAG_INCOMPLETE
         if quality.renamed:

@@ -98,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"marker placement: {note}", file=sys.stderr)
     for line in activity.notes():
         log.info(line)
-    for line in activity.warnings() + unnamed_warnings(extra["markers"], joints) \
+    for line in activity.warnings() + unnamed_warnings(extra["markers"], joints, extra.get("wrists_unseparated")) \
             + legs_warnings(extra.get("legs_unsure"), joints, t):
         print(f"samba-process: WARNING: {line}", file=sys.stderr)
     if solved < 0.5 * len(t):
@@ -112,16 +112,28 @@ def main(argv: list[str] | None = None) -> int:
 UNNAMED_WARN = 0.1
 
 
-def unnamed_warnings(markers: np.ndarray, joints: np.ndarray, share: float = UNNAMED_WARN) -> list[str]:
+def unnamed_warnings(markers: np.ndarray, joints: np.ndarray, together: np.ndarray | None = None,
+                     share: float = UNNAMED_WARN) -> list[str]:
     """One line per marker left unnamed in more than ``share`` of the frames with a pose: its
     limb there is the solver's guess (often tens of cm off), not a measurement. markers:
-    (F, 8, 3) named markers (NaN = unnamed); joints: (F, 13, 3) poses (NaN = none)."""
+    (F, 8, 3) named markers (NaN = unnamed); joints: (F, 13, 3) poses (NaN = none); together:
+    (F,) bool, the frames whose two wrists were left unnamed because no view saw them apart
+    (hands together: solved from their merged point, not guessed), reported on a line of their
+    own (None: none)."""
     solved = np.isfinite(joints).all(axis=(1, 2))
     n = int(solved.sum())
     if n == 0:
         return []
     unnamed = ~np.isfinite(markers[solved]).all(axis=2)  # (n, 8)
     out = []
+    if together is not None:
+        held = np.asarray(together, bool)[solved]
+        unnamed[np.ix_(held, [MARKER_NAMES.index("left_wrist"), MARKER_NAMES.index("right_wrist")])] = False
+        k = int(held.sum())
+        if k > share * n:
+            out.append(f"both wrists unnamed in {k} of {n} frames with a pose ({100 * k / n:.0f} %): hands together, "
+                       f"no view saw them apart; the arms are solved from their merged blobs and may be each "
+                       f"other's (joint_bound covers it; wrists_unseparated in the output marks the frames)")
     for m in np.flatnonzero(unnamed.mean(axis=0) > share):
         side, part = MARKER_NAMES[m].split("_")
         limb = "arm" if part in ("shoulder", "wrist") else "leg"

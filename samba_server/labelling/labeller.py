@@ -79,6 +79,7 @@ class LabelConfig:
     glued_wrist_s: float = 0.3  #: a wrist held a shoulder width from the other shoulder this long, its own shoulder unnamed, is that shoulder
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
     wrist_clear_m: float = 0.15  #: a lost wrist found within its arm's reach must be this far from every named marker
+    apart_views: int = 2  #: both wrists named, neither seen apart from the other in this many views (hands together): the poses carry them unnamed, a gap rather than a coin flip, still solved from them (0: never; :meth:`Labeller.unseparated`)
     max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast ...
     turn_slack_deg: float = 45.0  #: ... plus this much (noise of the shoulder points) between labellings
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
@@ -345,6 +346,39 @@ class Labeller:
         rough = (pts.n_views - pts.n_merged < 2) | pts.mirrored | pts.merged_all  # (P,)
         twice = np.bincount(p[on], minlength=len(pts)) > 1  # (P,) points two names share
         out[on] = (rough | twice)[p[on]]
+        return out
+
+    def unseparated(self, markers: np.ndarray) -> np.ndarray:
+        """(8,) bool: both wrists of this frame's markers (8, 3) world m (NaN = not named), when
+        both are named and neither was seen apart from the other in ``apart_views`` views (a
+        blob the other wrist's point does not use, of a single marker's size or with the other
+        wrist on a blob of its own in that view); a wrist on no point (placed beside a merged
+        point, or rescued from blobs) is seen apart nowhere. Hands
+        together on a hilt or a bat leave the two wrists' names a coin flip that no view can
+        settle: 14-16 cm swapped for a second in a swordplay. The server's poses and
+        ``samba-process``'s two-way output carry them unnamed; the solves still use them (the
+        two-way one loosely) and raise the wrists' and elbows' bounds to the distance between the
+        wrists (:func:`~samba_server.recon.bounds.mirrored_wrists`).
+        All False with ``apart_views`` 0."""
+        out = np.zeros(N_MARKERS, bool)
+        need = self.config.apart_views
+        if need <= 0 or not np.isfinite(markers[[LW, RW]]).all():
+            return out
+        pts = self._pts
+        p, on = self._points_of(markers)
+        if on[LW] and on[RW] and p[LW] == p[RW]:
+            out[[LW, RW]] = True
+            return out
+        for m, other in ((LW, RW), (RW, LW)):
+            if not on[m]:
+                continue
+            blobs = pts.blob[:, p[m]]
+            theirs = pts.blob[:, p[other]] if on[other] else np.full_like(blobs, -1)
+            apart = sum(1 for c, b in enumerate(blobs)
+                        if b >= 0 and b != theirs[c] and (self._views[c].capacity[b] == 1 or theirs[c] >= 0))
+            if apart >= need:
+                return out
+        out[[LW, RW]] = True
         return out
 
     def _points_of(self, markers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

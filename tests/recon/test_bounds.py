@@ -9,7 +9,8 @@ import pytest
 from samba_common.body import prepend_standard_pose
 from samba_common.bvh import load_bvh, resample
 from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT
-from samba_server.recon.bounds import CONFIDENT_M, UNSEEN_SPEED, mirrored_legs, swivel_radius, widened
+from samba_server.recon.bounds import (CONFIDENT_M, UNSEEN_SPEED, mirrored_legs, mirrored_wrists, swivel_radius,
+                                       widened)
 from samba_server.recon.db import load_default_db
 from samba_server.recon.evaluate import vary_body
 from samba_server.recon.reconstruct import reconstruct_take
@@ -101,3 +102,17 @@ def test_legs_unsure_of_their_side_widen_the_knees_and_ankles_to_the_other_side(
     rest = [j for j in range(13) if j not in (J["left_knee"], J["right_knee"], J["left_ankle"], J["right_ankle"])]
     assert np.allclose(out[0, rest], 0.03) and np.allclose(out[1], bounds[1])
     assert (out[0, J["left_knee"]] >= CONFIDENT_M) and bounds[0, J["left_knee"]] == 0.03  # a new array
+
+
+def test_wrists_no_view_separates_cover_each_other():
+    """Hands together, unseparated (their names may be each other's): each wrist's and elbow's
+    bound is at least the distance between the wrists; the rest, and other frames, keep theirs."""
+    J = {n: i for i, n in enumerate(JOINT_NAMES)}
+    joints = np.zeros((2, 13, 3))
+    joints[:, J["left_wrist"]], joints[:, J["right_wrist"]] = [0.07, 0.3, 1.1], [-0.07, 0.3, 1.1]
+    bounds = np.full((2, 13), 0.03)
+    out = mirrored_wrists(bounds, joints, np.array([True, False]))
+    arm = [J["left_wrist"], J["right_wrist"], J["left_elbow"], J["right_elbow"]]
+    assert np.allclose(out[0, arm], 0.14)
+    assert np.allclose(np.delete(out[0], arm), 0.03) and np.allclose(out[1], bounds[1])
+    assert bounds[0, J["left_wrist"]] == 0.03  # a new array

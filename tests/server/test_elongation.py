@@ -3,6 +3,8 @@ the server places the two markers from them (feet at hip width: knees and ankles
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -229,3 +231,81 @@ def test_hands_together_on_a_turning_hilt_are_placed_from_the_moments(sigma_px):
         assert err.max() < 0.02, err.max(axis=0)
     else:
         assert err.max() > 0.06, err.max(axis=0)
+
+
+def _hilt_take():
+    """The hilt scene of the test above, held still: 30 frames of the standard pose, the hands
+    brought to the hilt in 0.5 s (12 cm apart, left and right), then held there 1 s, merged in
+    every view. Returns the rig, markers (F, 8, 3) and the static clutter (3, 3) m."""
+    rig = default_rig(4)
+    hip = float(DEFAULT_LENGTHS[BONE_TYPES.index("hip_width")])
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", hip))[list(MARKER_JOINT)]
+    hilt = np.array([0.0, 0.25, 1.15])
+    half = 0.06 * (pose[LW] - pose[RW]) / np.linalg.norm(pose[LW] - pose[RW])
+    frames = [pose.copy() for _ in range(30)]
+    for s in np.linspace(0.0, 1.0, 91)[1:]:
+        m = pose.copy()
+        s = min(1.0, 3.0 * s)
+        m[LW] = (1 - s) * pose[LW] + s * (hilt + half)
+        m[RW] = (1 - s) * pose[RW] + s * (hilt - half)
+        frames.append(m)
+    return rig, np.array(frames), np.array([[2.5, 0.0, 2.5], [-2.5, 0.5, 2.4], [0.0, 2.8, 2.6]])
+
+
+@pytest.mark.parametrize("apart_views", [2, 0])
+def test_samba_process_leaves_hands_no_view_separates_unnamed(apart_views):
+    """Hands together on a hilt, merged in every view: which wrist is which is a coin flip no
+    view can settle (a swordplay had them swapped, 14-16 cm off, for a second). The labelling
+    still names both for the solver and the two-way pass (``Labeller.unseparated`` flags them);
+    the poses the live server sends and the two-way output of ``samba-process`` leave them
+    unnamed, a gap rather than a guess, while every frame is still solved and the wrists' bounds
+    cover the other wrist. With ``apart_views = 0`` they are named."""
+    from samba_server.both_ways import PassResult, relabel_both_ways
+    from samba_server.recon.reconstruct import Reconstructor
+    from samba_server.server import Server, ServerConfig
+    from samba_common.skeleton import JOINT_NAMES
+
+    rig, frames, clutter = _hilt_take()
+    F = len(frames)
+    server = Server(rig, None, Reconstructor(lengths=DEFAULT_LENGTHS), ServerConfig(max_lag_ms=0.0),
+                    label_config=LabelConfig(apart_views=apart_views))
+    t = np.arange(F) / FPS
+    packets = [_merging_packets(rig, np.vstack([m, clutter]), float(t[k])) for k, m in enumerate(frames)]
+    fwd = PassResult(np.full((F, 8, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan),
+                     unseparated=np.zeros((F, 8), bool))
+    for k in range(F):
+        markers, _mask, _q = server.label_packets(packets[k], float(t[k]))
+        fwd.markers[k] = server.solve_markers(markers, float(t[k]))[0]
+        fwd.unseparated[k] = server.labeller.unseparated(fwd.markers[k])
+    held = np.arange(60, F)  # hands on the hilt
+    assert all(int((p.area == 18).sum()) == 3 for p in packets[-1])  # hands, knees, ankles merged
+    assert np.isfinite(fwd.markers[:30]).all() and np.isfinite(fwd.markers[held]).all()  # the live pass names them
+    assert fwd.unseparated[held][:, [LW, RW]].all() == (apart_views == 2)
+    assert not fwd.unseparated[:30].any() and not fwd.unseparated[:, [0, 1, 4, 5, 6, 7]].any()
+    joints, extra = relabel_both_ways(server, packets, t, fwd)
+    out = extra["markers"]
+    assert np.isfinite(joints).all()  # every frame solved
+    assert np.isfinite(out[:30]).all() and np.isfinite(out[held][:, [0, 1, 4, 5, 6, 7]]).all()
+    wrists = [JOINT_NAMES.index("left_wrist"), JOINT_NAMES.index("right_wrist")]
+    if apart_views:
+        assert np.isnan(out[held][:, [LW, RW]]).all()
+        apart = np.linalg.norm(joints[held, wrists[0]] - joints[held, wrists[1]], axis=1)
+        assert (extra["joint_bound"][held][:, wrists] >= apart[:, None] - 1e-9).all() and apart.min() > 0.05
+    else:
+        assert np.isfinite(out[held]).all()
+    live = Server(rig, None, Reconstructor(lengths=DEFAULT_LENGTHS), ServerConfig(max_lag_ms=0.0),
+                  label_config=LabelConfig(apart_views=apart_views))
+    base = 10**12
+    for cam in rig.cameras:
+        live.mote_event(cam.name, True, base)
+    for k, frame in enumerate(packets):
+        for pkt in frame:
+            live.ingest(pkt.mote_id, encode_packet(replace(pkt, seq=k, t_ns=base + int(t[k] * 1e9))),
+                        arrival_ns=base + int(t[k] * 1e9))
+        live.process_pending()
+    live.finish()
+    sent = np.array([p.markers for p in live.poses])
+    assert len(sent) == F and all(p.solved for p in live.poses[-len(held):])
+    assert np.isnan(sent[held][:, [LW, RW]]).all() == bool(apart_views)
+    assert np.isfinite(sent[held][:, [0, 1, 4, 5, 6, 7]]).all()
+    assert all((p.marker_mask & 0b1100 == 0) == bool(apart_views) for p in live.poses[-len(held):])

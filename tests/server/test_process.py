@@ -125,6 +125,24 @@ def test_a_limb_the_solver_guessed_in_many_frames_is_reported():
     assert "right leg" in unnamed_warnings(markers, joints)[1]
 
 
+def test_hands_together_are_reported_apart_from_guessed_limbs():
+    """Both wrists left unnamed because no view saw them apart (hands together) are not the
+    solver's guess: one line says so, and the wrists are not reported as guessed limbs there;
+    a wrist unnamed in other frames still is."""
+    F = 100
+    joints = np.zeros((F, 13, 3))
+    markers = np.zeros((F, 8, 3))
+    together = np.zeros(F, bool)
+    together[20:60] = True
+    markers[20:60, 2:4] = np.nan
+    lines = unnamed_warnings(markers, joints, together)
+    assert len(lines) == 1 and lines[0].startswith("both wrists unnamed in 40 of 100 frames") and "apart" in lines[0]
+    markers[70:90, 2] = np.nan  # the left wrist hidden elsewhere: guessed there
+    lines = unnamed_warnings(markers, joints, together)
+    assert len(lines) == 2 and lines[1].startswith("left wrist unnamed in 20 of 100 frames")
+    assert [w.split(" unnamed")[0] for w in unnamed_warnings(markers, joints)] == ["left wrist", "right wrist"]
+
+
 def test_legs_unsure_of_their_side_for_half_a_second_are_reported():
     """Legs whose left and right were unsure (legs_unsure) in frames with a pose for 0.5 s or
     more get one warning with the longest stretch; a shorter doubt, or one only in frames
