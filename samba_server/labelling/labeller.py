@@ -353,9 +353,9 @@ class Labeller:
         both are named and neither was seen apart from the other in ``apart_views`` views (a
         blob the other wrist's point does not use, of a single marker's size or with the other
         wrist on a blob of its own in that view); a wrist on no point (placed beside a merged
-        point, or rescued from blobs) is seen apart nowhere. Hands
-        together on a hilt or a bat leave the two wrists' names a coin flip that no view can
-        settle: 14-16 cm swapped for a second in a swordplay. The server's poses and
+        point, or rescued from blobs) is seen apart nowhere. Hands together on a hilt or a bat
+        leave the two wrists' names a coin flip that no view can settle: 14-16 cm swapped for a
+        second in a swordplay. The server's poses and
         ``samba-process``'s two-way output carry them unnamed; the solves still use them (the
         two-way one loosely) and raise the wrists' and elbows' bounds to the distance between the
         wrists (:func:`~samba_server.recon.bounds.mirrored_wrists`).
