@@ -107,9 +107,9 @@ def process_frames(server: Server, names: list[str], frames: list[Iterable[np.nd
     def note_renamed(msg) -> None:  # runs right after its frame was labelled: the last quality is that frame's
         q = server.labeller.last_quality
         named = np.array(server.last_named, float)
+        gap = np.isfinite(named).all(axis=1) & ~np.isfinite(np.asarray(msg.markers, float)).all(axis=1)
         labelled_by_seq[msg.seq] = (q.renamed, q.margin_m if q.mode == "identified" else float("nan"),
-                                    server.labeller.loose(named), server.labeller.legs_unsure,
-                                    server.labeller.unseparated(named), named)
+                                    server.labeller.loose(named), server.labeller.legs_unsure, gap, named)
 
     server.pose_listeners.append(note_renamed)  # (legs_unsure is output one-pass too)
     i = 0

@@ -118,7 +118,8 @@ class Server:
         #: callables(PoseMessage) called with every pose after ``publish``
         self.pose_listeners: list[Callable] = []
         #: (8, 3) world m: the last frame's names before the output left unseparated wrists
-        #: unnamed (:meth:`Labeller.unseparated`); what the solver and samba-process's two-way pass use
+        #: unnamed (:meth:`Labeller.unseparated`); what the solver and samba-process's two-way pass
+        #: use. The markers named here and unnamed in the pose are those wrists.
         self.last_named = np.full((8, 3), np.nan)
         #: replay: pose seqs whose solve the live server skipped (recorded FLAG_SOLVE_SKIPPED).
         #: When set (a replay), the recording's decisions replace the wall-clock ones: the lag
