@@ -108,33 +108,27 @@ def mirrored_legs(bounds: np.ndarray, joints: np.ndarray, unsure: np.ndarray | b
     :attr:`samba_server.labelling.Labeller.legs_unsure`), each knee's and ankle's raised to
     its distance from the other side's, joints (..., 13, 3) m: named the other way round, the
     joint would be there. The hips stay (mirrored legs move them by a few cm). A new array."""
-    return _mirrored(bounds, joints, unsure, (_KNEES, _ANKLES))
+    return _mirrored(bounds, joints, unsure, ((_KNEES, _KNEES), (_ANKLES, _ANKLES)))
 
 
 def mirrored_wrists(bounds: np.ndarray, joints: np.ndarray, unsure: np.ndarray | bool) -> np.ndarray:
     """Bounds (..., 13) m with, where unsure (...) bool (the wrists' names may be each other's:
     no view saw them apart, :meth:`samba_server.labelling.Labeller.unseparated`), each wrist's
     and elbow's raised to the distance between the wrists of joints (..., 13, 3) m. A new array."""
-    unsure = np.asarray(unsure, bool)
-    joints = np.asarray(joints, float)
-    out = _mirrored(bounds, joints, unsure, (_WRISTS,))
-    apart = np.linalg.norm(joints[..., _WRISTS[0], :] - joints[..., _WRISTS[1], :], axis=-1)
-    apart = np.where(unsure & np.isfinite(apart), apart, 0.0)
-    for elbow, _sh, _wr in _ARMS:
-        out[..., elbow] = np.maximum(out[..., elbow], apart)
-    return out
+    return _mirrored(bounds, joints, unsure, ((_WRISTS, _WRISTS + [elbow for elbow, _sh, _wr in _ARMS]),))
 
 
-def _mirrored(bounds: np.ndarray, joints: np.ndarray, unsure: np.ndarray | bool, pairs) -> np.ndarray:
-    """Bounds (..., 13) m with, where unsure (...), both joints of each (left, right) pair of
-    pairs raised to their distance apart in joints (..., 13, 3) m. A new array."""
+def _mirrored(bounds: np.ndarray, joints: np.ndarray, unsure: np.ndarray | bool, groups) -> np.ndarray:
+    """Bounds (..., 13) m with, where unsure (...), the joints of each group raised to the
+    distance apart in joints (..., 13, 3) m of its (left, right) pair. groups: ((left, right),
+    joints raised) pairs. A new array."""
     out = np.array(bounds, float)
     unsure = np.asarray(unsure, bool)
     joints = np.asarray(joints, float)
-    for left, right in pairs:
+    for (left, right), raised in groups:
         apart = np.linalg.norm(joints[..., left, :] - joints[..., right, :], axis=-1)
         apart = np.where(unsure & np.isfinite(apart), apart, 0.0)
-        for j in (left, right):
+        for j in raised:
             out[..., j] = np.maximum(out[..., j], apart)
     return out
 
