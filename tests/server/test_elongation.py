@@ -187,6 +187,18 @@ def test_a_marker_seen_only_merged_with_another_gets_a_point_on_the_blobs_far_en
     assert (err < 0.01).all(), err
 
 
+def _hilt_scene():
+    """A 4-camera rig, the standard pose at hip width (8, 3) m, a sword hilt in front of the
+    belly (3,) m, the unit vector (3,) from the right wrist to the left one in that pose, and
+    three static reflections high on the walls (3, 3) m."""
+    rig = default_rig(4)
+    hip = float(DEFAULT_LENGTHS[BONE_TYPES.index("hip_width")])
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", hip))[list(MARKER_JOINT)]
+    left = (pose[LW] - pose[RW]) / np.linalg.norm(pose[LW] - pose[RW])
+    clutter = np.array([[2.5, 0.0, 2.5], [-2.5, 0.5, 2.4], [0.0, 2.8, 2.6]])
+    return rig, pose, np.array([0.0, 0.25, 1.15]), left, clutter
+
+
 @pytest.mark.parametrize("sigma_px", [0.5, float("inf")])
 def test_hands_together_on_a_turning_hilt_are_placed_from_the_moments(sigma_px):
     """Both hands on a sword hilt in front of the belly, 12 cm apart and merged in every view,
@@ -197,12 +209,8 @@ def test_hands_together_on_a_turning_hilt_are_placed_from_the_moments(sigma_px):
     the tracks alone (inf) the wrists lag the turn, 6 cm or more off at some frame of it. Three
     static reflections keep the views' typical blob a single marker's (hands, knees and ankles
     merged: three of the subject's five blobs are two markers' size)."""
-    rig = default_rig(4)
-    hip = float(DEFAULT_LENGTHS[BONE_TYPES.index("hip_width")])
-    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", hip))[list(MARKER_JOINT)]
+    rig, pose, hilt, left, clutter = _hilt_scene()
     lab = Labeller(rig, config=LabelConfig(split_wrists_sigma_px=sigma_px))
-    hilt = np.array([0.0, 0.25, 1.15])
-    left = (pose[LW] - pose[RW]) / np.linalg.norm(pose[LW] - pose[RW])
 
     def hands(theta: float) -> np.ndarray:
         return 0.06 * (np.cos(theta) * left + np.sin(theta) * np.array([0.0, 0.0, 1.0]))
@@ -217,7 +225,6 @@ def test_hands_together_on_a_turning_hilt_are_placed_from_the_moments(sigma_px):
         m = pose.copy()
         m[LW], m[RW] = hilt + hands(theta), hilt - hands(theta)
         frames.append(m)
-    clutter = np.array([[2.5, 0.0, 2.5], [-2.5, 0.5, 2.4], [0.0, 2.8, 2.6]])  # static reflections
     err = []
     for i, m in enumerate(frames):
         packets = _merging_packets(rig, np.vstack([m, clutter]), i / FPS)
@@ -237,11 +244,8 @@ def _hilt_take():
     """The hilt scene of the test above, held still: 30 frames of the standard pose, the hands
     brought to the hilt in 0.5 s (12 cm apart, left and right), then held there 1 s, merged in
     every view. Returns the rig, markers (F, 8, 3) and the static clutter (3, 3) m."""
-    rig = default_rig(4)
-    hip = float(DEFAULT_LENGTHS[BONE_TYPES.index("hip_width")])
-    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", hip))[list(MARKER_JOINT)]
-    hilt = np.array([0.0, 0.25, 1.15])
-    half = 0.06 * (pose[LW] - pose[RW]) / np.linalg.norm(pose[LW] - pose[RW])
+    rig, pose, hilt, left, clutter = _hilt_scene()
+    half = 0.06 * left
     frames = [pose.copy() for _ in range(30)]
     for s in np.linspace(0.0, 1.0, 91)[1:]:
         m = pose.copy()
@@ -249,7 +253,7 @@ def _hilt_take():
         m[LW] = (1 - s) * pose[LW] + s * (hilt + half)
         m[RW] = (1 - s) * pose[RW] + s * (hilt - half)
         frames.append(m)
-    return rig, np.array(frames), np.array([[2.5, 0.0, 2.5], [-2.5, 0.5, 2.4], [0.0, 2.8, 2.6]])
+    return rig, np.array(frames), clutter
 
 
 @pytest.mark.parametrize("apart_views", [2, 0])
