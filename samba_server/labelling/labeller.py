@@ -355,11 +355,10 @@ class Labeller:
         wrist on a blob of its own in that view); a wrist on no point (placed beside a merged
         point, or rescued from blobs) is seen apart nowhere. Hands together on a hilt or a bat
         leave the two wrists' names a coin flip that no view can settle: 14-16 cm swapped for a
-        second in a swordplay. The server's poses and
-        ``samba-process``'s two-way output carry them unnamed; the solves still use them (the
-        two-way one loosely) and raise the wrists' and elbows' bounds to the distance between the
-        wrists (:func:`~samba_server.recon.bounds.mirrored_wrists`).
-        All False with ``apart_views`` 0."""
+        second in a swordplay. The server's poses and ``samba-process``'s two-way output carry
+        them unnamed; the solves still use them (the two-way one loosely) and raise the wrists'
+        and elbows' bounds to the distance between the wrists
+        (:func:`~samba_server.recon.bounds.mirrored_wrists`). All False with ``apart_views`` 0."""
         out = np.zeros(N_MARKERS, bool)
         need = self.config.apart_views
         if need <= 0 or not np.isfinite(markers[[LW, RW]]).all():
