@@ -232,6 +232,8 @@ class Labeller:
         self._glue: tuple[list, list] = ([], [])  # per shoulder: (t, wrist-to-other-shoulder m, height difference m, wrist)
         self._on_point = np.full(N_MARKERS, -np.inf)  # per marker: when it was last named on a point (not rescued)
         self._rescued = np.zeros(N_MARKERS, bool)  # this frame's markers found by :meth:`_rescue`
+        # this frame's rescues: (X (3,) m, blob per view (C,))
+        self._rescue_blobs: list[tuple[np.ndarray, np.ndarray]] = []
 
     # ------------------------------------------------------------------ feedback from the server
     def observe(self, t: float, joints: np.ndarray) -> None:
@@ -352,32 +354,42 @@ class Labeller:
         """(8,) bool: both wrists of this frame's markers (8, 3) world m (NaN = not named), when
         both are named and neither was seen apart from the other in ``apart_views`` views (a
         blob the other wrist's point does not use, of a single marker's size or with the other
-        wrist on a blob of its own in that view); a wrist on no point (placed beside a merged
-        point, or rescued from blobs) is seen apart nowhere. Hands together on a hilt or a bat
-        leave the two wrists' names a coin flip that no view can settle: 14-16 cm swapped for a
-        second in a swordplay. The server's poses and ``samba-process``'s two-way output carry
-        them unnamed; the solves still use them (the two-way one loosely) and raise the wrists'
-        and elbows' bounds to the distance between the wrists
-        (:func:`~samba_server.recon.bounds.mirrored_wrists`). All False with ``apart_views`` 0."""
+        wrist on a blob of its own in that view); a wrist rescued from two views' blobs
+        (:meth:`_rescue`) is seen in those two, one on no point (placed beside a merged point)
+        nowhere. Hands together on a hilt or a bat leave the two wrists' names a coin flip that
+        no view can settle: 14-16 cm swapped for a second in a swordplay. The server's poses and
+        ``samba-process``'s two-way output carry them unnamed; the solves still use them (the
+        two-way one loosely) and raise the wrists' and elbows' bounds to the distance between
+        the wrists (:func:`~samba_server.recon.bounds.mirrored_wrists`). All False with
+        ``apart_views`` 0."""
         out = np.zeros(N_MARKERS, bool)
         need = self.config.apart_views
         if need <= 0 or not np.isfinite(markers[[LW, RW]]).all():
             return out
-        pts = self._pts
-        p, on = self._points_of(markers)
-        if on[LW] and on[RW] and p[LW] == p[RW]:
+        blobs = self._blobs_of(markers)
+        lw, rw = blobs[LW], blobs[RW]
+        if (lw >= 0).any() and np.array_equal(lw, rw):
             out[[LW, RW]] = True
             return out
         for m, other in ((LW, RW), (RW, LW)):
-            if not on[m]:
-                continue
-            blobs = pts.blob[:, p[m]]
-            theirs = pts.blob[:, p[other]] if on[other] else np.full_like(blobs, -1)
-            apart = sum(1 for c, b in enumerate(blobs)
+            theirs = blobs[other]
+            apart = sum(1 for c, b in enumerate(blobs[m])
                         if b >= 0 and b != theirs[c] and (self._views[c].capacity[b] == 1 or theirs[c] >= 0))
             if apart >= need:
                 return out
         out[[LW, RW]] = True
+        return out
+
+    def _blobs_of(self, markers: np.ndarray) -> np.ndarray:
+        """(8, C) the blob per view of the point each marker of markers (8, 3) m is named on, or of
+        the two blobs it was rescued from (:meth:`_rescue`); -1 where it has none (not named, not
+        seen in that view, or on no point: placed beside a merged point)."""
+        out = np.full((N_MARKERS, len(self._views)), -1, np.int64)
+        p, on = self._points_of(markers)
+        if on.any():
+            out[on] = self._pts.blob[:, p[on]].T
+        for X, blobs in self._rescue_blobs:
+            out[np.linalg.norm(np.asarray(markers, float) - X, axis=1) <= 1e-6] = blobs
         return out
 
     def _points_of(self, markers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -437,6 +449,7 @@ class Labeller:
         self.stats.frames += 1
         self._t_prev, self._t_frame = self._t_frame, t
         self._rescued[:] = False
+        self._rescue_blobs = []
         self._views = [view_blobs(p) for p in packets]
         pts = self._pts = self.points.reconstruct(self._views)
         if len(pts) >= 2:
@@ -729,8 +742,13 @@ class Labeller:
                                   & (_nearest(res.points, rival) >= dp + cfg.rescue_m)
                                   & self.points.plausible(res.points))
             if good.size:
-                out[m] = res.points[good[np.argmin(dp[good])]]
+                k = good[np.argmin(dp[good])]
+                out[m] = res.points[k]
                 self._rescued[m] = True
+                a, b, ba, bb = combos[k]
+                blobs = np.full(C, -1, np.int64)
+                blobs[a], blobs[b] = ba, bb
+                self._rescue_blobs.append((out[m].copy(), blobs))
                 found += 1
         return found
 

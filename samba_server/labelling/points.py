@@ -150,6 +150,25 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
+def _more_sure(keep: list[int], n_views: np.ndarray, err: np.ndarray, keep2: list[int], n2: np.ndarray,
+               e2: np.ndarray) -> bool:
+    """Whether the acceptance keep2 (candidate indices, with their n2 views and e2 errors, px) has
+    more points seen by >= 3 views than keep (n_views, err), using as many of the views' blobs
+    with them, and none of the points only it took is rougher than the roughest of those only
+    keep took. Two shoulders with raised arms, each merged with a wrist in two views, made a
+    4-view ghost of the one's blobs in two views and the other's in two (0.7-0.8 px), and 2-view
+    ghosts of what it left; without it, both are 3-view points (0.04 and 0.6 px, the second
+    through a merged blob). The ghosts' views outnumber theirs, so a count of all views used
+    keeps the ghost."""
+    only, only2 = sorted(set(keep) - set(keep2)), sorted(set(keep2) - set(keep))
+    if not only or not only2:
+        return False
+    sure, sure2 = n_views[keep] >= 3, n2[keep2] >= 3
+    rough = float(np.max(np.nan_to_num(err[only], nan=np.inf)))
+    return (int(sure2.sum()) > int(sure.sum()) and int(n2[keep2][sure2].sum()) >= int(n_views[keep][sure].sum())
+            and float(np.max(np.nan_to_num(e2[only2], nan=np.inf))) <= rough)
+
+
 class PointReconstructor:
     """3D points from unlabelled blobs for one rig (precomputes the pairwise geometry)."""
 
@@ -684,11 +703,12 @@ class PointReconstructor:
         the wrists), which the greedy order (more views first) took before the two 3-view
         wrists. Without each such point the acceptance is run again (from the candidates as
         they were before it, ``fresh``: X, err, n_views, blob); the other outcome is taken when
-        it uses as many blobs, leaves no more views unexplained and its points' errors sum at
-        least ``rough_px`` less. When that fails, the acceptance is run again with the point
-        replaced by the two points of its views' split (:meth:`_split_rough`): two markers,
-        each hidden from the views that see the other, have no candidate of their own (each
-        one's pair of views is supported by the other's blobs and grows into the rough point).
+        it leaves no more views unexplained and either uses as many blobs with errors summing
+        at least ``rough_px`` less, or has more points seen by >= 3 views (:func:`_more_sure`).
+        When that fails, the acceptance is run again with the point replaced by the two points
+        of its views' split (:meth:`_split_rough`): two markers, each hidden from the views that
+        see the other, have no candidate of their own (each one's pair of views is supported by
+        the other's blobs and grows into the rough point).
         ``accepted``: X, err, n_views, blob after the first acceptance; uv (C, K, 2), missing
         (K,): the candidates' blobs and unexplained views. Returns keep, capl, X, err, n_views,
         blob, uv, missing (the last four with the split's candidates appended when one was taken)."""
@@ -703,8 +723,10 @@ class PointReconstructor:
                 without[s] = False
                 keep2, capl2 = self._accept(penalty2, views, without, *trial, uv2)
                 n2, e2 = trial[2], trial[1]
-                if n2[keep2].sum() >= n_views[keep].sum() and missing2[keep2].sum() <= missing[keep].sum() \
-                        and e2[keep2].sum() <= err[keep].sum() - cfg.rough_px:
+                fewer_errors = (n2[keep2].sum() >= n_views[keep].sum()
+                                and e2[keep2].sum() <= err[keep].sum() - cfg.rough_px)
+                if missing2[keep2].sum() <= missing[keep].sum() \
+                        and (fewer_errors or _more_sure(keep, n_views, err, keep2, n2, e2)):
                     keep, capl, ok, penalty, uv, missing, fresh = keep2, capl2, without, penalty2, uv2, missing2, cand
                     X, err, n_views, blob = trial
                     break

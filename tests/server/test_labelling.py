@@ -640,6 +640,44 @@ def test_two_wrists_lined_up_in_other_views_are_not_made_one_ghost(rough_px):
         assert (off > 0.1).all(), off
 
 
+@pytest.mark.parametrize("rough_px", [PointsConfig().rough_px, np.inf])
+def test_two_shoulders_under_raised_arms_are_not_made_one_ghost(rough_px):
+    """Blobs of a rendered take (arms raised above the head, traced): each shoulder merges with
+    its wrist in two views. The left shoulder's blobs in cameras 0 and 2 and the right one's in
+    1 and 3 made a 4-view ghost 23 cm in front of them (0.69 px), which the acceptance took first
+    (more views), and 2-view ghosts of what it left: neither shoulder had a point, both went
+    unnamed, and the left one was then named on a ghost 21 cm off. Without it both shoulders
+    are 3-view points (0.04 and 0.63 px: the second through a merged blob). Those use six blobs
+    against the ghosts' eight and sum to no smaller error, so the first check (as many blobs,
+    ``rough_px`` less error) keeps the ghost; the second (more points of >= 3 views, none rougher
+    than the ghost) takes them. With ``rough_px`` inf the check is off: the ghost stays."""
+    blobs = [  # per camera: u, v, capacity, radius (px)
+        [[59.64, 28.57, 2, 2.65], [68.29, 63.88, 1, 1.60], [68.99, 30.45, 1, 1.60], [70.16, 52.84, 1, 1.69],
+         [74.69, 63.11, 1, 1.60], [76.30, 51.23, 1, 1.60], [79.30, 27.76, 1, 1.60], [148.14, 107.80, 1, 1.87],
+         [154.50, 52.12, 1, 1.38]],
+        [[6.40, 95.79, 2, 2.26], [74.41, 27.77, 1, 1.49], [78.06, 51.01, 1, 1.69], [81.08, 61.07, 1, 1.69],
+         [82.99, 30.28, 1, 1.49], [85.84, 63.21, 1, 1.60], [87.27, 52.42, 1, 1.69], [89.63, 31.48, 1, 1.60],
+         [93.27, 30.00, 1, 1.69]],
+        [[3.25, 109.54, 1, 1.60], [79.70, 28.82, 1, 2.03], [83.02, 54.39, 1, 1.78], [84.70, 66.79, 1, 1.78],
+         [88.27, 52.44, 1, 1.78], [90.85, 64.70, 1, 1.60], [91.49, 31.72, 1, 1.95], [98.30, 29.31, 2, 2.46],
+         [148.89, 22.28, 1, 1.78]],
+        [[4.50, 91.58, 1, 1.13], [9.77, 18.98, 1, 1.49], [66.96, 32.01, 2, 2.59], [71.50, 53.86, 1, 1.60],
+         [73.01, 66.11, 1, 1.69], [75.13, 33.21, 1, 1.78], [77.82, 67.27, 1, 1.78], [81.14, 54.87, 1, 1.69],
+         [86.07, 30.23, 1, 1.87]],
+    ]
+    shoulders = np.array([[0.003, -0.526, 1.871], [0.333, -0.526, 1.9]])  # the take's truth: left, right
+    got = _points_from_blobs(blobs, PointsConfig(rough_px=rough_px))
+    d = np.linalg.norm(got.X[:, None] - shoulders[None], axis=2)  # (P, 2)
+    ghost = np.flatnonzero((got.n_views >= 4) & (d.min(axis=1) > 0.15) & (d.min(axis=1) < 0.4))  # in front of them
+    if np.isfinite(rough_px):
+        assert (d.min(axis=0) < 0.03).all(), d.min(axis=0)  # the right one 1.8 cm off: a merged blob
+        assert (got.n_views[d.argmin(axis=0)] == 3).all()
+        assert ghost.size == 0
+    else:
+        assert (d.min(axis=0) > 0.15).all(), d.min(axis=0)
+        assert ghost.size == 1
+
+
 @pytest.mark.parametrize("case", ["single", "check off", "merged"])
 def test_two_ankles_each_hidden_from_the_views_that_see_the_other_are_two_points(case):
     """Blobs of a rendered take (dribbling with the feet together, traced): the ankles are 7 cm apart and
@@ -1634,6 +1672,41 @@ def test_a_hand_in_front_of_a_shoulder_keeps_its_name_when_the_shoulder_takes_it
         assert _right(got[89:], truth[89:]).all()
     else:  # last on a point at frame 88: rescued up to 1 s later, then left unnamed
         assert hand[:58].all() and not np.isfinite(got[89 + 61:, LW]).any()
+
+
+def test_wrists_rescued_from_blobs_apart_are_not_taken_for_hands_together():
+    """Both wrists 1.5 m apart, each hidden from two cameras (the left from cam0 and cam3, the
+    right from cam0 and cam2), and each one's 2-view point lost to a ghost: a reflection on the
+    wall seen by two cameras lines up with the left wrist's cam2 blob and the right one's cam3
+    blob, making 3-view points that take those blobs first. Tracking names both wrists from
+    their own two blobs (:meth:`Labeller._rescue`). The views see them apart (one marker per
+    blob, a blob of each in cam1), so they are not a pair no view separates: counted as seen
+    nowhere, a rescued wrist left both unnamed for 9 frames of a walk (001_01, seed 602)."""
+    rig = default_rig(4)
+    pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
+    hidden = np.zeros((len(rig), 8), bool)
+    hidden[[0, 3], LW] = True
+    hidden[[0, 2], RW] = True
+    ghosts = []  # per wrist: a point 40 cm behind it on the ray of the camera whose blob it takes
+    for m, c, others in ((LW, 2, (1, 3)), (RW, 3, (0, 1))):
+        ray = pose[m] - rig.cameras[c].center
+        ghosts.append((rig.cameras[c].center + ray * (1 + 0.4 / np.linalg.norm(ray)), others))
+    reflections = [np.array([rig.cameras[c].project(g[None])[0] for g, others in ghosts if c in others]).reshape(-1, 2)
+                   for c in range(len(rig))]
+    lab = Labeller(rig)
+    rng = np.random.default_rng(8)
+    both, apart = 0, 0
+    for i in range(40):
+        named, _q = lab.label(_packets(rig, pose, i / FPS, rng, hidden=hidden if i >= 30 else None,
+                                       distractors=reflections if i >= 30 else None), i / FPS)
+        if i >= 30 and _right(named[None], pose[None])[0, [LW, RW]].all():
+            both += 1
+            apart += not lab.unseparated(named).any()
+        if i == 30:  # the setting is as described: no point for either wrist, a point on each ghost
+            pts = lab.points.reconstruct(lab._views)
+            assert all(np.min(np.linalg.norm(pts.X - pose[m], axis=1)) > 0.05 for m in (LW, RW))
+            assert all(np.min(np.linalg.norm(pts.X - g, axis=1)) < 0.01 for g, _ in ghosts)
+    assert both >= 8 and apart == both, (both, apart)
 
 
 def test_shoulders_whose_blobs_the_points_stage_paired_crossed_are_named_from_them():
