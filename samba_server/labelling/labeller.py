@@ -464,6 +464,7 @@ class Labeller:
         q = LabelQuality(n_points=len(pts))
         out = np.full((N_MARKERS, 3), np.nan)
         if n_pred >= self.config.min_tracked and len(pts):
+            self._uncross(pts, pred)
             out, q, assign = self._track(pts, pred, gate, t)
             self._unglue(out, assign, t)
             q.n_labelled += self._rescue(pts, out, assign, pred, t)
@@ -751,6 +752,72 @@ class Labeller:
                 self._rescue_blobs.append((out[m].copy(), blobs))
                 found += 1
         return found
+
+    def _uncross(self, pts: Points3D, pred: np.ndarray) -> int:
+        """Two 2-view points of the same two views, neither within ``rescue_m`` of any marker's
+        prediction (pred (8, 3) m), whose blobs paired the other way round meet within
+        ``rescue_px`` each and lie within ``rescue_m`` of two different markers' predictions,
+        are those two markers: the points stage paired each one's blob in one view with the
+        other's in the second. Two ankles side by side on one epipolar plane of the only two
+        cameras that see them (the body hiding them from the other two) make both pairings fit;
+        the true pair projects into the hiding views with no blob there, the crossed ghosts,
+        30 cm off, where no camera looks, so the ghosts ranked first, and both ankles of a dance
+        went unnamed for 26 frames (006_02, seed 602). Replaces the two points in pts in place
+        (X, error, blob, unexplained, votes, behind); returns how many pairs it re-paired. Off with
+        ``rescue_m`` 0."""
+        cfg = self.config
+        have = np.isfinite(pred).all(axis=1)
+        two = np.flatnonzero(pts.n_views == 2)
+        if cfg.rescue_m <= 0 or have.sum() < 2 or len(two) < 2:
+            return 0
+        markers = np.flatnonzero(have)
+
+        def near(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # distance (m) to, and index of, the nearest prediction
+            d = np.linalg.norm(X[:, None] - pred[markers][None], axis=2)
+            return d.min(axis=1), markers[d.argmin(axis=1)]
+
+        far = two[near(pts.X[two])[0] > cfg.rescue_m]
+        done: set[int] = set()
+        C = len(self._views)
+        for i, p in enumerate(far.tolist()):
+            for q in far[i + 1:].tolist():
+                if p in done or q in done:
+                    continue
+                cams = np.flatnonzero(pts.blob[:, p] >= 0)  # (a mirrored or parted point may list others)
+                if len(cams) != 2 or pts.mirrored[[p, q]].any() \
+                        or not np.array_equal(cams, np.flatnonzero(pts.blob[:, q] >= 0)):
+                    continue
+                a, b = cams.tolist()
+                blobs = pts.blob[[a, b]][:, [p, q]]  # (2 views, 2 points)
+                if (blobs[:, 0] == blobs[:, 1]).any() or (self._views[a].capacity[blobs[0]] != 1).any() \
+                        or (self._views[b].capacity[blobs[1]] != 1).any():
+                    continue
+                swapped = blobs[:, ::-1].copy()
+                swapped[0] = blobs[0]  # view a keeps its blobs, view b's are exchanged
+                uv = np.full((C, 2, 2), np.nan)
+                uv[a] = self._views[a].uv[swapped[0]]
+                uv[b] = self._views[b].uv[swapped[1]]
+                res = self.points.tri.triangulate(uv)
+                d, m = near(res.points)
+                others = np.delete(pts.X, [p, q], axis=0)
+                if not ((res.error <= cfg.rescue_px).all() and (d <= cfg.rescue_m).all() and m[0] != m[1]
+                        and (_nearest(res.points, others) >= cfg.points.min_separation_m).all()
+                        and self.points.plausible(res.points).all()):
+                    continue
+                log.debug("points %d and %d re-paired in views %d and %d: markers %s", p, q, a, b, m.tolist())
+                for k, pt in enumerate((p, q)):
+                    pts.X[pt], pts.error[pt] = res.points[k], res.error[k]
+                    pts.blob[b, pt] = swapped[1, k]
+                    pts.votes[pt] = 0
+                    for c in (a, b):
+                        hint = self._views[c].hint[pts.blob[c, pt]]
+                        if hint >= 0:
+                            pts.votes[pt, hint] += 1
+                pts.unexplained[[p, q]] = self.points.missed(pts.X[[p, q]], self._views, pts.blob[:, [p, q]])
+                if pts.behind is not None:
+                    pts.behind[[p, q]] = 0
+                done |= {p, q}
+        return len(done) // 2
 
     def _recover(self, pts: Points3D, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
                  row_pt: np.ndarray) -> None:

@@ -238,7 +238,8 @@ class PointReconstructor:
         ok = self.plausible(pair.points)
         if not ok.any():
             return Points3D.empty(C)
-        X = pair.points[ok]
+        X = pair_X = pair.points[ok]
+        pair_err = pair.error[ok]
         K = len(X)
         pair_blob = np.full((C, len(ok)), -1, np.int64)  # each candidate's two blobs
         pair_blob[cams_arr[:, 0], np.arange(len(ok))] = ia_all
@@ -286,6 +287,9 @@ class PointReconstructor:
         # make the point: their pair triangulations differ a little)
         missing = np.full(len(first), C, np.int64)
         np.minimum.at(missing, group, (inside & (blob[:, group] < 0) & ~in_merged[:, group]).sum(axis=0))
+        X, err, n_views, blob, uv, missing, counts, ok = self._pairs_kept(
+            X, err, n_views, blob, uv, missing, counts, ok, (pair_X, pair_err, pair_blob), group, inside, in_merged,
+            ids, views)
         # a 2-view candidate far from the body (a distractor's blob with a marker's, where no
         # other camera looks) ranks as if two more views missed it: it stole a marker's blob
         far = np.zeros(len(X), bool)
@@ -346,6 +350,47 @@ class PointReconstructor:
         behind = self._behind(views, proj, depth, n_views[idx], blob, missing)
         return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing, blob,
                         votes, n_merged > 0, merged_all, n_merged, mirrored, behind)
+
+    def _pairs_kept(self, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray, uv: np.ndarray,
+                    missing: np.ndarray, counts: np.ndarray, ok: np.ndarray, pairs: tuple, group: np.ndarray,
+                    inside: np.ndarray, in_merged: np.ndarray, ids: dict, views: list[ViewBlobs]) -> tuple:
+        """A pair of blobs whose candidate, triangulated with its supporting views, dropped one of
+        the pair's own two blobs also stays as that pair alone (a 2-view candidate on the pair's
+        triangulation). A knee hidden from one view projected 1.7 px from the other knee's blob
+        there and onto a merged blob in a third: with those two supports the triangulation
+        dropped one of the knee's own views, moved 6.6 cm off and lost its blobs to the points
+        that own them, and the knee, its own two blobs used by no point, went unnamed for 8
+        frames (005_18, seed 602). Only pairs of two single markers' blobs that meet within
+        ``rough_px``: a merged blob's centroid is no marker's (the knees passing in a walk, one
+        blob each in the view where they part, merged in the others, are :meth:`_part`'s to
+        split; a pair of a merged blob and a parting one took the free blob it needs). Candidate arrays X (K, 3) m, err (K,) px, n_views, missing,
+        counts, ok (K,), blob (C, K), uv (C, K, 2) px, in_merged (C, K) (its nearest blob per view
+        is merged); pairs: the pairs' triangulations X (Q, 3), err (Q,) and blobs (C, Q); group
+        (Q,): each pair's candidate; inside (C, Q): the pair projects inside the image; ids: the
+        blob rows the candidates were grouped by. Returns the arrays grown by the pairs kept."""
+        pair_X, pair_err, seeds = pairs
+        single = np.ones(seeds.shape[1], bool)
+        for c, v in enumerate(views):
+            has = seeds[c] >= 0
+            single[has] &= v.capacity[seeds[c, has]] == 1
+        lost = (ok[group] & single & (pair_err <= self.config.rough_px)
+                & ((seeds >= 0) & (blob[:, group] != seeds)).any(axis=0))
+        new: dict[tuple, int] = {}
+        for q in np.flatnonzero(lost):
+            new.setdefault(tuple(seeds[:, q].tolist()), q)
+        q = np.array([q for key, q in new.items() if key not in ids], np.int64)
+        if not q.size:
+            return X, err, n_views, blob, uv, missing, counts, ok
+        bn = seeds[:, q]
+        un = np.full((self.C, len(q), 2), np.nan)
+        for c in range(self.C):
+            has = bn[c] >= 0
+            un[c, has] = views[c].uv[bn[c, has]]
+        mn = (inside[:, q] & (bn < 0) & ~in_merged[:, group[q]]).sum(axis=0)
+        n = len(q)
+        return (np.vstack([X, pair_X[q]]), np.r_[err, pair_err[q]], np.r_[n_views, np.full(n, 2)],
+                np.hstack([blob, bn]), np.concatenate([uv, un], axis=1), np.r_[missing, mn],
+                np.r_[counts, np.ones(n, counts.dtype)], np.r_[ok, np.ones(n, bool)])
 
     def _behind(self, views: list[ViewBlobs], proj: np.ndarray, depth: np.ndarray, n_views: np.ndarray,
                 blob: np.ndarray, missing: np.ndarray) -> np.ndarray:
@@ -830,6 +875,24 @@ class PointReconstructor:
         blob[drop, k] = -1
         blob[~res.used[:, 0], k] = -1
         return True
+
+    def missed(self, X: np.ndarray, views: list[ViewBlobs], blob: np.ndarray) -> np.ndarray:
+        """(N,) int: views in whose image each point of X (N, 3) m falls with no blob within
+        ``support_px`` (a merged blob's extra tolerance added) other than its own (blob (C, N),
+        -1 = none): the points' unexplained views, as :meth:`reconstruct` counts them."""
+        proj, depth = self.tri.project(X)
+        out = np.zeros(len(X), np.int64)
+        inside = self._inside(proj, depth)
+        for c, v in enumerate(views):
+            look = inside[c] & (blob[c] < 0)
+            if not look.any():
+                continue
+            if not len(v):
+                out += look
+                continue
+            d = np.linalg.norm(proj[c, :, None, :] - v.uv[None], axis=2) - self._merged_extra(v)[None]
+            out += look & ~(np.nanmin(d, axis=1) <= self.config.support_px)
+        return out
 
     def plausible(self, X: np.ndarray) -> np.ndarray:
         """(N,) bool: points X (N, 3) m (NaN rows: False) inside the capture volume (``z_min``

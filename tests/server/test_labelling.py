@@ -528,17 +528,26 @@ def test_a_stance_turned_against_the_shoulders_keeps_its_names_when_a_knee_comes
     assert ok[71:].all(), np.argwhere(~ok[71:])[:5]  # up to 1 s into the crossing (the knees' hold)
 
 
+def _views_from_blobs(blobs: list) -> list:
+    """ViewBlobs per camera from per-camera blob lists [[u, v, capacity, radius (px)], ...] (a
+    traced frame of a rendered take; no hints, no moments)."""
+    from samba_server.labelling.blobs import ViewBlobs
+    return [ViewBlobs(np.array(b)[:, :2], np.array(b)[:, 2].astype(np.int64), np.array(b)[:, 3],
+                      np.full(len(b), -1, np.int64), np.full((len(b), 3), np.nan)) for b in blobs]
+
+
+def _server_triangulator(rig) -> Triangulator:
+    """The triangulator with the settings of configs/server.toml."""
+    from samba_server.triangulate import TriangulateConfig
+    return Triangulator(rig, TriangulateConfig(max_error_px=1.0))
+
+
 def _points_from_blobs(blobs: list, config: PointsConfig | None = None) -> Points3D:
     """3D points of one frame of the default 4-camera rig from per-camera blob lists
     [[u, v, capacity, radius (px)], ...] (a traced frame of a rendered take), with the
     triangulator settings of configs/server.toml."""
-    from samba_server.labelling.blobs import ViewBlobs
-    from samba_server.triangulate import TriangulateConfig
     rig = default_rig(4)
-    pr = PointReconstructor(rig, Triangulator(rig, TriangulateConfig(max_error_px=1.0)), config)
-    views = [ViewBlobs(np.array(b)[:, :2], np.array(b)[:, 2].astype(np.int64), np.array(b)[:, 3],
-                       np.full(len(b), -1, np.int64), np.full((len(b), 3), np.nan)) for b in blobs]
-    return pr.reconstruct(views)
+    return PointReconstructor(rig, _server_triangulator(rig), config).reconstruct(_views_from_blobs(blobs))
 
 
 def test_two_markers_merged_in_all_views_but_one_become_two_points():
@@ -676,6 +685,37 @@ def test_two_shoulders_under_raised_arms_are_not_made_one_ghost(rough_px):
     else:
         assert (d.min(axis=0) > 0.15).all(), d.min(axis=0)
         assert ghost.size == 1
+
+
+def test_a_knee_whose_supports_pull_its_triangulation_off_keeps_its_own_two_views():
+    """Blobs of a rendered take (a dance, traced): the right knee is seen by cameras 2 and 3,
+    hidden from camera 1, where it projects 1.7 px from the left knee's blob, and merged with
+    the right ankle in camera 0. Its pair's two blobs meet within 0.05 px, but with those two
+    supports the triangulation dropped camera 3's blob (its own), moved 6.6 cm off and lost its
+    blobs to the points that own them: no point within 17 cm of the knee, its two blobs used by
+    none, the knee unnamed for 8 frames. The pair alone stays a candidate: a 2-view point on
+    the knee."""
+    blobs = [  # per camera: u, v, capacity, radius (px)
+        [[71.08, 61.20, 1, 1.69], [73.34, 49.29, 1, 1.78], [73.57, 72.93, 2, 2.39], [74.62, 80.26, 1, 1.69],
+         [79.27, 71.64, 1, 1.69], [80.01, 48.73, 1, 1.69], [81.23, 59.39, 1, 1.60], [149.98, 41.18, 1, 1.49],
+         [150.90, 7.08, 1, 1.49]],
+        [[79.68, 48.70, 1, 1.60], [79.74, 70.97, 1, 1.60], [81.70, 78.06, 1, 1.49], [85.22, 50.37, 1, 1.69],
+         [85.99, 61.47, 1, 1.60], [89.46, 74.05, 1, 1.49], [148.88, 18.55, 1, 1.38], [154.67, 111.42, 1, 1.13]],
+        [[5.18, 52.74, 1, 1.38], [6.84, 90.60, 1, 1.69], [77.59, 62.68, 1, 1.87], [78.91, 50.84, 1, 1.69],
+         [79.86, 71.84, 1, 1.60], [84.18, 72.98, 1, 1.69], [85.58, 49.45, 1, 1.87], [86.46, 82.03, 2, 2.33],
+         [87.85, 61.35, 1, 1.69]],
+        [[11.95, 96.93, 1, 1.60], [68.49, 79.89, 1, 1.60], [73.88, 50.28, 1, 1.60], [77.16, 81.82, 1, 1.60],
+         [77.67, 73.31, 1, 1.60], [79.15, 63.37, 1, 1.69], [79.37, 51.02, 1, 1.69], [151.92, 48.54, 1, 1.87]],
+    ]
+    truth = np.array([[-0.158, -0.131, 1.243], [0.147, -0.152, 1.259], [-0.21, -0.121, 0.844], [0.199, -0.216, 0.836],
+                      [-0.001, -0.011, 0.453], [0.074, -0.169, 0.423], [0.067, -0.188, 0.09], [-0.075, -0.487, 0.214]])
+    got = _points_from_blobs(blobs)
+    d = np.linalg.norm(got.X[:, None] - truth[None], axis=2)  # (P, 8)
+    knee = int(np.argmin(d[:, RK]))
+    assert d[knee, RK] < 0.01, d[:, RK].min()
+    assert got.blob[2, knee] == 5 and got.blob[3, knee] == 4  # its own two blobs
+    # every other marker keeps its point (the right ankle, merged in two views, within 7 cm)
+    assert (d.min(axis=0)[[LS, RS, LW, RW, LK, LA]] < 0.01).all(), d.min(axis=0)
 
 
 @pytest.mark.parametrize("case", ["single", "check off", "merged"])
@@ -1672,6 +1712,48 @@ def test_a_hand_in_front_of_a_shoulder_keeps_its_name_when_the_shoulder_takes_it
         assert _right(got[89:], truth[89:]).all()
     else:  # last on a point at frame 88: rescued up to 1 s later, then left unnamed
         assert hand[:58].all() and not np.isfinite(got[89 + 61:, LW]).any()
+
+
+@pytest.mark.parametrize("case", ["predicted", "predicted far", "off"])
+def test_two_ankles_the_points_stage_paired_crossed_are_repaired_by_their_predictions(case):
+    """Blobs of a rendered take (a dance at the edge of the volume, traced): only cameras 0 and
+    1 see the feet, the ankles side by side on one epipolar plane of theirs, so each ankle's
+    blob in camera 0 fits the other's in camera 1 too. The crossed pairs lie where cameras 2
+    and 3 do not look, the true ones where they do (and see no blob): the ghosts, 30 cm off,
+    ranked first, and both ankles went unnamed. With the ankles predicted where they are, the
+    two points are paired the other way round; with predictions 20 cm off (beyond
+    ``rescue_m``), or ``rescue_m`` 0, they stay as they are."""
+    blobs = [  # per camera: u, v, capacity, radius (px)
+        [[20.21, 37.81, 1, 1.49], [23.51, 33.01, 1, 1.38], [29.05, 66.04, 1, 1.26], [30.09, 56.02, 1, 1.26],
+         [32.20, 31.87, 1, 1.38], [33.61, 55.48, 1, 1.38], [34.06, 64.87, 1, 1.26], [36.54, 41.09, 1, 1.38],
+         [149.99, 41.13, 1, 1.49], [150.86, 7.05, 1, 1.60]],
+        [[105.52, 34.82, 1, 1.13], [112.12, 31.38, 1, 0.98], [112.35, 52.47, 1, 1.13], [113.72, 61.25, 1, 1.13],
+         [115.26, 52.90, 1, 1.13], [118.14, 62.20, 1, 0.98], [119.07, 40.35, 1, 1.26], [119.31, 31.23, 1, 1.13],
+         [148.86, 18.54, 2, 1.38], [154.65, 111.48, 1, 1.13]],
+        [[5.17, 52.72, 1, 1.38], [6.84, 90.60, 1, 1.69]],
+        [[0.88, 98.92, 1, 2.03], [3.76, 62.10, 2, 3.29], [11.97, 96.94, 1, 1.60], [151.93, 48.53, 1, 1.87]],
+    ]
+    truth = np.array([[0.167, -3.003, 1.739], [0.591, -3.014, 1.708], [0.058, -2.852, 1.306], [0.85, -2.801, 1.522],
+                      [0.228, -2.885, 0.626], [0.437, -2.878, 0.628], [0.155, -3.11, 0.087], [0.43, -3.106, 0.085]])
+    rig = default_rig(4)
+    lab = Labeller(rig, _server_triangulator(rig), LabelConfig(rescue_m=0.0) if case == "off" else None)
+    lab._views = _views_from_blobs(blobs)
+    pts = lab.points.reconstruct(lab._views)
+
+    def off() -> np.ndarray:  # (2,) m: each ankle to its nearest point
+        return np.linalg.norm(pts.X[:, None] - truth[None, [LA, RA]], axis=2).min(axis=0)
+
+    assert (off() > 0.2).all(), off()  # the setting: two crossed ghosts, no ankle point
+    pred = truth.copy()
+    if case == "predicted far":
+        pred[[LA, RA], 1] += 0.2
+    n = lab._uncross(pts, pred)
+    if case == "predicted":
+        assert n == 1 and (off() < 0.01).all(), (n, off())
+        near = np.linalg.norm(pts.X[:, None] - truth[None, [LA, RA]], axis=2).argmin(axis=0)
+        assert (pts.n_views[near] == 2).all() and (pts.error[near] < 0.1).all()
+    else:
+        assert n == 0 and (off() > 0.2).all()
 
 
 def test_wrists_rescued_from_blobs_apart_are_not_taken_for_hands_together():
