@@ -776,21 +776,37 @@ class Labeller:
             d = np.linalg.norm(X[:, None] - pred[markers][None], axis=2)
             return d.min(axis=1), markers[d.argmin(axis=1)]
 
-        far = two[near(pts.X[two])[0] > cfg.rescue_m]
-        done: set[int] = set()
+        far = two[(near(pts.X[two])[0] > cfg.rescue_m) & ~pts.mirrored[two]]
+        far = far[(pts.blob[:, far] >= 0).sum(axis=0) == 2]  # (a parted point may list more views)
+        if len(far) < 2:
+            return 0
+        # per far point, view and marker: its blob there (a single marker's) lies by the marker's
+        # predicted projection. A pairing the other way round can only land on a marker whose
+        # projections both blobs lie by: clutter's ghosts mostly have none, so few pairs are tried.
         C = len(self._views)
-        for i, p in enumerate(far.tolist()):
-            for q in far[i + 1:].tolist():
-                if p in done or q in done:
+        proj, depth = self.points.tri.project(pred[markers])  # (C, M, 2) px, (C, M) m
+        radius = cfg.rescue_m * self.points.f[:, None] / np.maximum(depth, 0.1) + 1.0  # (C, M) px
+        by = np.zeros((len(far), C, len(markers)), bool)
+        for c, v in enumerate(self._views):
+            b = pts.blob[c, far]
+            has = np.flatnonzero(b >= 0)
+            if has.size:
+                d = np.linalg.norm(v.uv[b[has]][:, None] - proj[c][None], axis=2)  # (H, M) px
+                by[has, c] = (d <= radius[c]) & (depth[c] > 0.1) & (v.capacity[b[has]] == 1)[:, None]
+        cams = np.nonzero((pts.blob[:, far] >= 0).T)[1].reshape(-1, 2)  # (F, 2) each point's two views
+        rows = np.arange(len(far))
+        useful = np.flatnonzero(by[rows, cams[:, 0]].any(axis=1) & by[rows, cams[:, 1]].any(axis=1)).tolist()
+        done: set[int] = set()
+        for j, i in enumerate(useful):
+            for k in useful[j + 1:]:
+                p, q = int(far[i]), int(far[k])
+                if p in done or q in done or (cams[i] != cams[k]).any():
                     continue
-                cams = np.flatnonzero(pts.blob[:, p] >= 0)  # (a mirrored or parted point may list others)
-                if len(cams) != 2 or pts.mirrored[[p, q]].any() \
-                        or not np.array_equal(cams, np.flatnonzero(pts.blob[:, q] >= 0)):
+                a, b = cams[i].tolist()
+                if not ((by[i, a] & by[k, b]).any() and (by[k, a] & by[i, b]).any()):
                     continue
-                a, b = cams.tolist()
                 blobs = pts.blob[[a, b]][:, [p, q]]  # (2 views, 2 points)
-                if (blobs[:, 0] == blobs[:, 1]).any() or (self._views[a].capacity[blobs[0]] != 1).any() \
-                        or (self._views[b].capacity[blobs[1]] != 1).any():
+                if (blobs[:, 0] == blobs[:, 1]).any():
                     continue
                 swapped = blobs[:, ::-1].copy()
                 swapped[0] = blobs[0]  # view a keeps its blobs, view b's are exchanged
@@ -805,9 +821,9 @@ class Labeller:
                         and self.points.plausible(res.points).all()):
                     continue
                 log.debug("points %d and %d re-paired in views %d and %d: markers %s", p, q, a, b, m.tolist())
-                for k, pt in enumerate((p, q)):
-                    pts.X[pt], pts.error[pt] = res.points[k], res.error[k]
-                    pts.blob[b, pt] = swapped[1, k]
+                for n, pt in enumerate((p, q)):
+                    pts.X[pt], pts.error[pt] = res.points[n], res.error[n]
+                    pts.blob[b, pt] = swapped[1, n]
                     pts.votes[pt] = 0
                     for c in (a, b):
                         hint = self._views[c].hint[pts.blob[c, pt]]
