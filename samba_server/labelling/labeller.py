@@ -772,7 +772,8 @@ class Labeller:
             return 0
         markers = np.flatnonzero(have)
 
-        def near(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # distance (m) to, and index of, the nearest prediction
+        def near(X: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """(N,) distance (m) from each point of X (N, 3) to the nearest prediction, (N,) its marker."""
             d = np.linalg.norm(X[:, None] - pred[markers][None], axis=2)
             return d.min(axis=1), markers[d.argmin(axis=1)]
 

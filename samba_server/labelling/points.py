@@ -363,11 +363,13 @@ class PointReconstructor:
         frames (005_18, seed 602). Only pairs of two single markers' blobs that meet within
         ``rough_px``: a merged blob's centroid is no marker's (the knees passing in a walk, one
         blob each in the view where they part, merged in the others, are :meth:`_part`'s to
-        split; a pair of a merged blob and a parting one took the free blob it needs). Candidate arrays X (K, 3) m, err (K,) px, n_views, missing,
-        counts, ok (K,), blob (C, K), uv (C, K, 2) px, in_merged (C, K) (its nearest blob per view
-        is merged); pairs: the pairs' triangulations X (Q, 3), err (Q,) and blobs (C, Q); group
-        (Q,): each pair's candidate; inside (C, Q): the pair projects inside the image; ids: the
-        blob rows the candidates were grouped by. Returns the arrays grown by the pairs kept."""
+        split; a pair of a merged blob and a parting one took the free blob it needs).
+
+        Candidate arrays X (K, 3) m, err (K,) px, n_views, missing, counts, ok (K,), blob (C, K),
+        uv (C, K, 2) px, in_merged (C, K) (its nearest blob per view is merged); pairs: the pairs'
+        triangulations X (Q, 3), err (Q,) and blobs (C, Q); group (Q,): each pair's candidate;
+        inside (C, Q): the pair projects inside the image; ids: the blob rows the candidates were
+        grouped by. Returns the arrays grown by the pairs kept."""
         pair_X, pair_err, seeds = pairs
         single = np.ones(seeds.shape[1], bool)
         for c, v in enumerate(views):
