@@ -315,6 +315,7 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
             out.identified[k] = q.margin_m
         if progress is not None:
             progress.update(1)
+    server.stats.label_errors += twin.stats.label_errors
     return out
 
 

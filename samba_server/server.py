@@ -60,6 +60,7 @@ class ServerStats:
     solved: int = 0
     labels_overridden: int = 0
     solve_skipped: int = 0
+    label_errors: int = 0  #: frames whose labelling raised (logged; the frame is output unnamed)
     mote_packets: dict[str, int] = field(default_factory=dict)
     #: latency of the last poses (ms), the newest 50 000..100 000 kept; a compact array('d')
     #: (8 bytes a pose) so that a long session's memory stays flat
@@ -288,7 +289,14 @@ class Server:
         if self.reconstructor is not None:
             self.labeller.set_lengths(getattr(self.reconstructor, "lengths", None),
                                       getattr(self.reconstructor, "offsets", None))
-        pts, quality = self.labeller.label(packets, t)
+        try:
+            pts, quality = self.labeller.label(packets, t)
+        except Exception:  # a labelling bug costs this frame's names, not the take (offline) or the stream
+            self.stats.label_errors += 1
+            if self.stats.label_errors <= 3 or self.stats.label_errors % 100 == 0:
+                log.exception("labelling failed on the frame at t=%.3f s (%d frames so far): frame left unnamed",
+                              t, self.stats.label_errors)
+            return np.full((N_MARKERS, 3), np.nan), 0, LabelQuality(mode="lost")
         mask = marker_bits(np.isfinite(pts).all(axis=1))
         return pts, mask, quality
 

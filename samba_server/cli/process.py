@@ -101,6 +101,9 @@ def main(argv: list[str] | None = None) -> int:
     for line in activity.warnings() + unnamed_warnings(extra["markers"], joints, extra.get("wrists_unseparated")) \
             + legs_warnings(extra.get("legs_unsure"), joints, t):
         print(f"samba-process: WARNING: {line}", file=sys.stderr)
+    if server.stats.label_errors:
+        print(f"samba-process: WARNING: the labelling failed on {server.stats.label_errors} frame(s) (an internal "
+              f"error, logged above; please report it): those frames are output unnamed", file=sys.stderr)
     if solved < 0.5 * len(t):
         print(f"samba-process: WARNING: only {solved} of {len(t)} frames solved: {server.failure_reason()}",
               file=sys.stderr)

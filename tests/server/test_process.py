@@ -93,6 +93,35 @@ def test_process_videos_close_to_clean_markers(tmp_path, capsys):
     assert err <= ref + 0.02
 
 
+def test_a_labelling_error_costs_its_frame_not_the_take(tmp_path, capsys, monkeypatch):
+    """A bug in the labelling (here: an exception on one frame of each pass) leaves that frame
+    unnamed, logged and counted; samba-process still writes every frame, solves the rest and
+    says so loudly (it crashed before, losing the whole take)."""
+    from samba_server.labelling.labeller import Labeller
+    joints, t = short_take(seconds=2.0, fps=FPS)
+    rig = default_rig(4)
+    calib = tmp_path / "calibration.toml"
+    rig.save(calib)
+    videos = _write_videos(tmp_path, rig, joints, t)
+    label = Labeller._label
+    calls = {"n": 0}
+
+    def failing(self, packets, t_s):
+        calls["n"] += 1
+        if calls["n"] % len(joints) == 45:  # frame 45 forwards, frame 14 backwards
+            raise RuntimeError("injected labelling bug")
+        return label(self, packets, t_s)
+
+    monkeypatch.setattr(Labeller, "_label", failing)
+    out = tmp_path / "joints.npz"
+    assert main([str(calib), *map(str, videos), "--out", str(out), "--fps", "30"]) == 0
+    err = capsys.readouterr().err
+    assert "WARNING: the labelling failed on 2 frame(s)" in err
+    got = load_joints(out)
+    assert got.joints.shape == joints.shape
+    assert np.isfinite(got.joints[int(1.6 * FPS):]).all(axis=(1, 2)).mean() > 0.95
+
+
 def test_process_bad_inputs(tmp_path, capsys):
     rig = default_rig(2)
     calib = tmp_path / "calibration.toml"
