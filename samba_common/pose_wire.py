@@ -151,14 +151,15 @@ def decode_pose(buf: bytes | bytearray | memoryview) -> PoseMessage:
     expected = head.size + nj * 12 + n_mk + (nj * 4 if flags & FLAG_BOUNDS else 0)
     if len(buf) != expected:
         raise PoseError(f"pose is {len(buf)} bytes, header says {expected}")
-    joints = np.frombuffer(buf, "<f4", count=nj * 3, offset=head.size).reshape(nj, 3).astype(np.float64)
-    markers = None
-    if flags & FLAG_MARKERS:
-        markers = np.frombuffer(buf, "<f4", count=N_MARKERS * 3, offset=head.size + nj * 12)
-        markers = markers.reshape(N_MARKERS, 3).astype(np.float64)
-    bound = None
-    if flags & FLAG_BOUNDS:
-        bound = np.frombuffer(buf, "<f4", count=nj, offset=head.size + nj * 12 + n_mk).astype(np.float64)
+    with np.errstate(invalid="ignore"):  # damaged bytes may hold signalling NaNs: NaN either way
+        joints = np.frombuffer(buf, "<f4", count=nj * 3, offset=head.size).reshape(nj, 3).astype(np.float64)
+        markers = None
+        if flags & FLAG_MARKERS:
+            markers = np.frombuffer(buf, "<f4", count=N_MARKERS * 3, offset=head.size + nj * 12)
+            markers = markers.reshape(N_MARKERS, 3).astype(np.float64)
+        bound = None
+        if flags & FLAG_BOUNDS:
+            bound = np.frombuffer(buf, "<f4", count=nj, offset=head.size + nj * 12 + n_mk).astype(np.float64)
     return PoseMessage(seq, t_ns, joints, lat, res, nm, nv, flags, markers, mask, float(margin), mode, bound)
 
 
