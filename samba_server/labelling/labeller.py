@@ -43,7 +43,7 @@ from ..triangulate import Triangulator
 from .blobs import view_blobs
 from .elongation import blob_separation, jacobians, separation_3d
 from .identify import Hint, identify, right_of, score_labels, sized
-from .points import PointReconstructor, Points3D, PointsConfig
+from .points import PointReconstructor, Points3D, PointsConfig, blob_votes
 from .rigid import LA, LEVEL_M, LK, LS, LW, RA, RK, RS, RW, SIDES, Body
 
 log = logging.getLogger(__name__)
@@ -822,14 +822,9 @@ class Labeller:
                         and self.points.plausible(res.points).all()):
                     continue
                 log.debug("points %d and %d re-paired in views %d and %d: markers %s", p, q, a, b, m.tolist())
-                for n, pt in enumerate((p, q)):
-                    pts.X[pt], pts.error[pt] = res.points[n], res.error[n]
-                    pts.blob[b, pt] = swapped[1, n]
-                    pts.votes[pt] = 0
-                    for c in (a, b):
-                        hint = self._views[c].hint[pts.blob[c, pt]]
-                        if hint >= 0:
-                            pts.votes[pt, hint] += 1
+                pts.X[[p, q]], pts.error[[p, q]] = res.points, res.error
+                pts.blob[b, [p, q]] = swapped[1]
+                pts.votes[[p, q]] = blob_votes(self._views, pts.blob[:, [p, q]])
                 pts.unexplained[[p, q]] = self.points.missed(pts.X[[p, q]], self._views, pts.blob[:, [p, q]])
                 if pts.behind is not None:
                     pts.behind[[p, q]] = 0

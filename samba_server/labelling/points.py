@@ -150,6 +150,27 @@ def _skew(v: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
+def blob_uv(views: list[ViewBlobs], blob: np.ndarray) -> np.ndarray:
+    """(C, K, 2) px: the blob positions of blob (C, K) (index per view, -1 = none: NaN)."""
+    uv = np.full((*blob.shape, 2), np.nan)
+    for c, v in enumerate(views):
+        has = blob[c] >= 0
+        uv[c, has] = v.uv[blob[c, has]]
+    return uv
+
+
+def blob_votes(views: list[ViewBlobs], blob: np.ndarray) -> np.ndarray:
+    """(K, 8) int: per point of blob (C, K) (index per view, -1 = none), how many of its views'
+    blobs the motes labelled as each marker."""
+    votes = np.zeros((blob.shape[1], 8), np.int64)
+    for c, v in enumerate(views):
+        rows = np.flatnonzero(blob[c] >= 0)
+        hint = v.hint[blob[c, rows]]
+        lab = hint >= 0
+        np.add.at(votes, (rows[lab], hint[lab]), 1)
+    return votes
+
+
 def _more_sure(keep: list[int], n_views: np.ndarray, err: np.ndarray, keep2: list[int], n2: np.ndarray,
                e2: np.ndarray) -> bool:
     """Whether the acceptance keep2 (candidate indices, with their n2 views and e2 errors, px) has
@@ -268,10 +289,7 @@ class PointReconstructor:
         group = np.array([ids.setdefault(tuple(r), len(ids)) for r in blob.T.tolist()], np.int64)
         _, first, counts = np.unique(group, return_index=True, return_counts=True)
         blob, in_merged = blob[:, first], in_merged[:, first]
-        uv = np.full((C, len(first), 2), np.nan)
-        for c in range(C):
-            good = blob[c] >= 0
-            uv[c, good] = views[c].uv[blob[c, good]]
+        uv = blob_uv(views, blob)
         # a point on just its candidate's two blobs is that candidate's triangulation (most
         # ghosts): only the others are triangulated again
         X, err, used = X[first], pair.error[ok][first], blob >= 0
@@ -323,7 +341,7 @@ class PointReconstructor:
                                                                      views, xy, cap)
         mirrored = np.r_[mirrored, np.zeros(len(idx) - len(mirrored), bool)]
         blob = blob[:, idx]
-        votes = np.zeros((len(idx), 8), np.int64)
+        votes = blob_votes(views, blob)
         n_merged = np.zeros(len(idx), np.int64)
         size = np.full((C, len(idx)), np.nan)  # blob area x (depth / f)^2: m^2, the marker's apparent size
         proj, depth = self.tri.project(X[idx])  # (C, P, 2) px, (C, P) m
@@ -331,10 +349,7 @@ class PointReconstructor:
             has = blob[c] >= 0
             if not has.any():
                 continue
-            hint = views[c].hint[blob[c, has]]
             rows = np.flatnonzero(has)
-            lab = hint >= 0
-            np.add.at(votes, (rows[lab], hint[lab]), 1)
             n_merged[rows] += views[c].capacity[blob[c, has]] > 1
             size[c, rows] = np.pi * views[c].radius[blob[c, has]] ** 2 * (depth[c, rows] / self.f[c]) ** 2
         merged_all = np.zeros(len(idx), bool)
@@ -384,10 +399,7 @@ class PointReconstructor:
         if not q.size:
             return X, err, n_views, blob, uv, missing, counts, ok
         bn = seeds[:, q]
-        un = np.full((self.C, len(q), 2), np.nan)
-        for c in range(self.C):
-            has = bn[c] >= 0
-            un[c, has] = views[c].uv[bn[c, has]]
+        un = blob_uv(views, bn)
         mn = (inside[:, q] & (bn < 0) & ~in_merged[:, group[q]]).sum(axis=0)
         n = len(q)
         return (np.vstack([X, pair_X[q]]), np.r_[err, pair_err[q]], np.r_[n_views, np.full(n, 2)],
@@ -848,14 +860,7 @@ class PointReconstructor:
         for i, own in enumerate(sets):
             bn[own, i] = blob[own, s]
             uvn[own, i] = uv[own, s]
-        # unexplained views: inside the image with no blob within support_px (a merged blob's radius more)
-        proj, depth = self.tri.project(P)  # (C, 2, 2), (C, 2)
-        unexplained = self._inside(proj, depth) & (bn < 0)  # (C, 2)
-        for c, v in enumerate(views):
-            if len(v):
-                d = (np.linalg.norm(proj[c][:, None, :] - v.uv[None], axis=2) - self._merged_extra(v)[None]).min(axis=1)
-                unexplained[c] &= ~(d <= cfg.support_px)
-        mn = unexplained.sum(axis=0).astype(np.int64)
+        mn = self.missed(P, views, bn)
         return P, e2, np.array([len(sets[0]), len(sets[1])], np.int64), bn, uvn, mn
 
     def _triangulate_views(self, uv: np.ndarray, k: int, cams: list[int]) -> TriangulationResult:
@@ -881,7 +886,8 @@ class PointReconstructor:
     def missed(self, X: np.ndarray, views: list[ViewBlobs], blob: np.ndarray) -> np.ndarray:
         """(N,) int: views in whose image each point of X (N, 3) m falls with no blob within
         ``support_px`` (a merged blob's extra tolerance added) other than its own (blob (C, N),
-        -1 = none): the points' unexplained views, as :meth:`reconstruct` counts them."""
+        -1 = none): the points' unexplained views, as :meth:`reconstruct` counts them (for
+        points it makes later: a split's, a re-pairing's)."""
         proj, depth = self.tri.project(X)
         out = np.zeros(len(X), np.int64)
         inside = self._inside(proj, depth)
@@ -892,8 +898,8 @@ class PointReconstructor:
             if not len(v):
                 out += look
                 continue
-            d = np.linalg.norm(proj[c, :, None, :] - v.uv[None], axis=2) - self._merged_extra(v)[None]
-            out += look & ~(np.nanmin(d, axis=1) <= self.config.support_px)
+            d = (np.linalg.norm(proj[c, :, None, :] - v.uv[None], axis=2) - self._merged_extra(v)[None]).min(axis=1)
+            out += look & ~(d <= self.config.support_px)
         return out
 
     def plausible(self, X: np.ndarray) -> np.ndarray:
