@@ -40,7 +40,8 @@ from samba_common.calib import CameraRig
 from samba_common.skeleton import MARKER_JOINT, N_MARKERS
 
 from ..triangulate import Triangulator
-from .blobs import view_blobs
+from .blobs import median_rows, view_blobs
+from .blobs import warm_up as warm_up_blobs
 from .elongation import blob_separation, jacobians, separation_3d
 from .identify import Hint, identify, right_of, score_labels, sized
 from .points import PointReconstructor, Points3D, PointsConfig, blob_votes
@@ -49,6 +50,14 @@ from .rigid import LA, LEVEL_M, LK, LS, LW, RA, RK, RS, RW, SIDES, Body
 log = logging.getLogger(__name__)
 
 __all__ = ["LabelConfig", "LabelQuality", "LabelStats", "Labeller"]
+
+
+def _unnamed(n: int, assign: np.ndarray) -> np.ndarray:
+    """The points (of n) no marker is named after, sorted: ``np.setdiff1d(np.arange(n),
+    assign[assign >= 0])`` for assign (8,) (point per marker, -1 = none), without its sorting."""
+    named = np.zeros(n, bool)
+    named[assign[assign >= 0]] = True
+    return np.flatnonzero(~named)
 
 
 @dataclass(frozen=True)
@@ -183,6 +192,7 @@ class Labeller:
         self.rig = rig
         self.config = config or LabelConfig()
         self.points = PointReconstructor(rig, triangulator or Triangulator(rig), self.config.points)
+        warm_up_blobs()
         self.stats = LabelStats()
         # the prior body (database mean); _body is the body the rules use: the prior at the size of the
         # first identification's shoulders, then the measured subject. With two cameras every point
@@ -458,7 +468,7 @@ class Labeller:
             if len(sure) >= 3:
                 # the body's travel: the median of the points no ghost makes (the mean of all
                 # points jumped as 2-view ghosts came and went: "walking backwards" after a blackout)
-                self._centres = [c for c in self._centres if t - c[0] <= 0.5] + [(t, np.median(sure, axis=0))]
+                self._centres = [c for c in self._centres if t - c[0] <= 0.5] + [(t, median_rows(sure))]
         pred, gate = self._predict(t)
         n_pred = int(np.isfinite(pred).all(axis=1).sum())
         q = LabelQuality(n_points=len(pts))
@@ -855,7 +865,7 @@ class Labeller:
         named = np.full((N_MARKERS, 3), np.nan)
         named[assign >= 0] = pts.X[assign[assign >= 0]]
         lost = np.flatnonzero(assign < 0)
-        free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
+        free = _unnamed(len(pts), assign)
         free = free[(pts.n_views[free] >= 3) | (pts.unexplained[free] <= 1)]
         if not lost.size or not free.size:
             return
@@ -1011,7 +1021,7 @@ class Labeller:
         """The named markers (8, 3) (NaN = unnamed) and the (knee, ankle) candidates among the
         points nobody took (assign (8,): point per marker, -1 = none): pairs of point indices a
         shin apart (within the tolerance), the knee above. Few, so clutter costs little."""
-        free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
+        free = _unnamed(len(pts), assign)
         named = np.full((N_MARKERS, 3), np.nan)
         named[assign >= 0] = pts.X[assign[assign >= 0]]
         X = pts.X[free]
@@ -1299,7 +1309,7 @@ class Labeller:
         tracked_out: (8, 3) the tracked names; assign: (8,) their points (-1 = unnamed). Returns
         (8, 3) markers and quality, or None."""
         cfg = self.config
-        free = np.setdiff1d(np.arange(len(pts)), assign[assign >= 0])
+        free = _unnamed(len(pts), assign)
         free = free[(pts.n_views[free] >= 3) | (pts.unexplained[free] == 0)]
         self._free_hist = [h for h in self._free_hist if t - h[0] <= 1.0] + [(t, pts.X[free])]
         if not math.isfinite(cfg.audit_interval) or t - self._t_audit < cfg.audit_interval or \
@@ -1396,7 +1406,10 @@ class Labeller:
         chooses. out (8, 3) in place; assign (8,) point per marker (-1: none); pred (8, 3) the
         markers' predictions; right (3,) the subject's right or None."""
         cfg = self.config
-        named = np.unique(assign[assign >= 0])
+        named = assign[assign >= 0]
+        if len(set(named.tolist())) == len(named):  # no point named twice
+            return
+        named = np.unique(named)
         for p in named:
             ms = np.flatnonzero(assign == p)
             if len(ms) != 2:
@@ -1592,7 +1605,7 @@ class Labeller:
             if 0 < dt <= self.config.track_timeout and np.isfinite(self._pos[m]).all():
                 v = (out[m] - self._pos[m]) / dt
                 self._vel[m] = 0.5 * self._vel[m] + 0.5 * v
-                speed = float(np.linalg.norm(self._vel[m]))
+                speed = math.sqrt(float(self._vel[m] @ self._vel[m]))  # np.linalg.norm's sum, at a third of its cost
                 if speed > 8.0:
                     self._vel[m] *= 8.0 / speed
             else:

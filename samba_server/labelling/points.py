@@ -42,14 +42,16 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from samba_common.calib import CameraRig
 
 from ..triangulate import TriangulationResult, Triangulator
-from .blobs import ViewBlobs, percentile
+from .blobs import ViewBlobs, median_rows, percentile
 from .elongation import blob_separation
 
 __all__ = ["PointsConfig", "Points3D", "PointReconstructor"]
@@ -190,6 +192,63 @@ def _more_sure(keep: list[int], n_views: np.ndarray, err: np.ndarray, keep2: lis
             and float(np.max(np.nan_to_num(e2[only2], nan=np.inf))) <= rough)
 
 
+@njit(cache=True)
+def _epipolar_matches(alg: np.ndarray, lb: np.ndarray, la: np.ndarray, fa: float, fb: float, tol_px: float,
+                      extra_a: np.ndarray, extra_b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The blob pairs of two views a, b within ``tol_px`` (plus each blob's extra, px) of each
+    other's epipolar line, in both images: (jb, ia) indices, b's blob then a's, in row-major
+    order of alg (Nb, Na) = x_b^T E x_a (NaN: no match). lb (Na, 3): a's blobs' lines in b; la
+    (Nb, 3): b's blobs' lines in a; fa, fb: the views' focal lengths (px)."""
+    Nb, Na = alg.shape
+    hb = np.empty(Na)
+    for i in range(Na):
+        hb[i] = np.hypot(lb[i, 0], lb[i, 1])
+    jb = np.empty(Nb * Na, np.int64)
+    ia = np.empty(Nb * Na, np.int64)
+    n = 0
+    for j in range(Nb):
+        ha = np.hypot(la[j, 0], la[j, 1])
+        for i in range(Na):
+            e = alg[j, i]
+            if not np.isfinite(e):
+                continue
+            tol = tol_px + extra_a[i] + extra_b[j]
+            if abs(e) / hb[i] * fb <= tol and abs(e) / ha * fa <= tol:  # NaN (0 / 0) fails, as np.maximum's NaN
+                jb[n], ia[n] = j, i
+                n += 1
+    return jb[:n], ia[:n]
+
+
+@njit(cache=True)
+def _nearest_blobs(proj: np.ndarray, uv: np.ndarray, extra: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per view and projection proj (C, K, 2) px: the nearest of the view's n[c] blobs uv (C, N, 2)
+    px by distance less the blob's extra tolerance (C, N) px, and that distance: (C, K) index
+    (-1 for a view without blobs; the first of equals) and (C, K) px (inf where NaN)."""
+    C, K = proj.shape[0], proj.shape[1]
+    near = np.full((C, K), -1, np.int64)
+    dist = np.full((C, K), np.inf)
+    for c in range(C):
+        if n[c] == 0:
+            continue
+        for k in range(K):
+            best, arg = np.inf, 0
+            for j in range(n[c]):
+                du, dv = proj[c, k, 0] - uv[c, j, 0], proj[c, k, 1] - uv[c, j, 1]
+                d = np.sqrt(du * du + dv * dv) - extra[c, j]
+                if np.isfinite(d) and d < best:
+                    best, arg = d, j
+            near[c, k], dist[c, k] = arg, best
+    return near, dist
+
+
+def _too_close(kept: list[tuple[float, float, float]], x: float, y: float, z: float, min_m: float) -> bool:
+    """Whether the nearest of the points kept (m) is nearer (x, y, z) than min_m: what
+    ``np.min(np.linalg.norm(kept - X, axis=1)) < min_m`` gives (NaN distances included), at a
+    fraction of its cost on the few points of one frame."""
+    d = [math.sqrt((a - x) * (a - x) + (b - y) * (b - y) + (c - z) * (c - z)) for a, b, c in kept]
+    return not any(v != v for v in d) and min(d) < min_m
+
+
 class PointReconstructor:
     """3D points from unlabelled blobs for one rig (precomputes the pairwise geometry)."""
 
@@ -208,21 +267,33 @@ class PointReconstructor:
                 R = cams[b].R @ cams[a].R.T
                 t = np.asarray(cams[b].tvec, float) - R @ np.asarray(cams[a].tvec, float)
                 self.pairs.append((a, b, _skew(t) @ R))  # x_b^T E x_a = 0 (normalised coordinates)
+        # compile the kernels (the first run on a machine) or load them from disk now, not on the first live frame
+        _epipolar_matches(np.zeros((1, 1)), np.ones((1, 3)), np.ones((1, 3)), 1.0, 1.0, 1.0, np.zeros(1), np.zeros(1))
+        _nearest_blobs(np.zeros((1, 1, 2)), np.zeros((1, 1, 2)), np.zeros((1, 1)), np.ones(1, np.int64))
 
-    def _normalised(self, views: list[ViewBlobs]) -> list[np.ndarray]:
-        n = max((len(v) for v in views), default=0)
-        uv = np.full((self.C, max(n, 1), 2), np.nan)
+    @staticmethod
+    def _offsets(views: list[ViewBlobs]) -> np.ndarray:
+        """(C,) int: where each view's blobs start in the views' blobs concatenated."""
+        return np.cumsum([0] + [len(v) for v in views[:-1]])
+
+    def _padded(self, views: list[ViewBlobs], extra: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The views' blobs in arrays padded to the most blobs N of a view: positions (C, N, 2)
+        px (NaN pad), extra tolerances (C, N) px (extra: per view, :meth:`_merged_extra`) and
+        capacities (C, N) (0 pad)."""
+        n = max(max((len(v) for v in views), default=0), 1)
+        uv, ex, cap = np.full((self.C, n, 2), np.nan), np.zeros((self.C, n)), np.zeros((self.C, n), np.int64)
         for c, v in enumerate(views):
-            uv[c, :len(v)] = v.uv
-        xy = self.tri.undistort_normalized(uv)
-        return [xy[c, :len(v)] for c, v in enumerate(views)]
+            uv[c, :len(v)], ex[c, :len(v)], cap[c, :len(v)] = v.uv, extra[c], v.capacity
+        return uv, ex, cap
 
     def reconstruct(self, views: list[ViewBlobs]) -> Points3D:
         """Points of one frame from per-view blobs (rig order; empty ViewBlobs for a missing view)."""
         cfg, C = self.config, self.C
-        xy = self._normalised(views)
-        hom = [np.concatenate([x, np.ones((len(x), 1))], axis=1) for x in xy]
         extra = [self._merged_extra(v) for v in views]
+        pad_uv, pad_extra, pad_cap = self._padded(views, extra)
+        pad_xy = self.tri.undistort_normalized(pad_uv)  # (C, N, 2) normalised coordinates
+        xy = [pad_xy[c, :len(v)] for c, v in enumerate(views)]
+        hom = [np.concatenate([x, np.ones((len(x), 1))], axis=1) for x in xy]
         cand_a: list[np.ndarray] = []
         cand_b: list[np.ndarray] = []
         cand_cams: list[tuple[int, int]] = []
@@ -233,10 +304,7 @@ class PointReconstructor:
             lb = ha @ E.T          # (Na, 3) lines in b
             la = hb @ E            # (Nb, 3) lines in a
             alg = hb @ lb.T        # (Nb, Na) = x_b^T E x_a
-            db = np.abs(alg) / np.hypot(lb[:, 0], lb[:, 1])[None, :] * self.f[b]
-            da = np.abs(alg) / np.hypot(la[:, 0], la[:, 1])[:, None] * self.f[a]
-            tol = cfg.epipolar_px + extra[a][None, :] + extra[b][:, None]
-            jb, ia = np.nonzero((np.maximum(da, db) <= tol) & np.isfinite(alg))
+            jb, ia = _epipolar_matches(alg, lb, la, self.f[a], self.f[b], cfg.epipolar_px, extra[a], extra[b])
             if len(ia):
                 cand_a.append(ia)
                 cand_b.append(jb)
@@ -272,17 +340,10 @@ class PointReconstructor:
         in_merged = np.zeros((C, K), bool)
         proj, depth = self.tri.project(X)  # (C, K, 2), (C, K)
         inside = self._inside(proj, depth)
-        for c in range(C):
-            v = views[c]
-            if len(v) == 0:
-                continue
-            d = np.linalg.norm(proj[c, :, None, :] - v.uv[None, :, :], axis=2)  # (K, N)
-            d -= extra[c][None, :]
-            d[~np.isfinite(d)] = np.inf
-            near = np.argmin(d, axis=1)
-            good = (d[np.arange(K), near] <= cfg.support_px) & (depth[c] > 0.1)
-            blob[c, good] = near[good]
-            in_merged[c, good] = v.capacity[near[good]] > 1
+        near, d = _nearest_blobs(proj, pad_uv, pad_extra, np.array([len(v) for v in views]))  # (C, K) nearest blob, px
+        cg, kg = np.nonzero((near >= 0) & (d <= cfg.support_px) & (depth > 0.1))
+        blob[cg, kg] = near[cg, kg]
+        in_merged[cg, kg] = pad_cap[cg, near[cg, kg]] > 1
         # candidates from different camera pairs that took the same blobs are one point: keep
         # the first of each (the same views give the same triangulation)
         ids: dict[tuple, int] = {}  # blobs -> group, numbered in order of their first candidate
@@ -315,7 +376,7 @@ class PointReconstructor:
         if counts[sure].sum() >= 3:
             # the body's centre: median over the candidates (a point counts once per camera
             # pair that found it, so the points more views see weigh more)
-            centre = np.median(np.repeat(X[sure, :2], counts[sure], axis=0), axis=0)
+            centre = median_rows(np.repeat(X[sure, :2], counts[sure], axis=0))
             far = (n_views < 3) & (np.linalg.norm(np.nan_to_num(X[:, :2]) - centre, axis=1) > cfg.body_radius_m)
         # greedy acceptance, best first
         penalty = missing + 2 * far
@@ -459,22 +520,22 @@ class PointReconstructor:
         as (X (3,), error px, blob per view (C,), uv per view (C, 2))."""
         cfg = self.config
         placed = np.zeros(len(idx), bool)
-        capb = _blob_capacity(blob[:, idx], views)
-        # per view: each blob's two ends (B, 2, 2) px and whether it holds two markers
-        sep = [blob_separation(v.moments) for v in views]
-        end_px = [v.uv[:, None, :] + np.array([0.5, -0.5])[None, :, None] * sp[:, None, :] for v, sp in zip(views, sep)]
-        span = [np.hypot(sp[:, 0], sp[:, 1]) for sp in sep]
-        holds_two = [(sl >= cfg.ends_min_px) & ((v.capacity > 1) | (sl >= cfg.elongated_px))
-                     for v, sl in zip(views, span)]  # NaN moments compare False
+        sub_blob = blob[:, idx]
+        capb = _blob_capacity(sub_blob, views)
+        # the accepted points' blobs (view c, blob b): whether each holds two markers, and its two ends
+        cs, rs = np.nonzero(sub_blob >= 0)
+        bs = sub_blob[cs, rs]
+        sep = blob_separation(np.concatenate([v.moments for v in views])[self._offsets(views)[cs] + bs])  # (M, 2) px
+        span = np.hypot(sep[:, 0], sep[:, 1])
+        caps = capb[cs, rs]
+        two = np.zeros(capb.shape, bool)  # (C, len(idx)) views where the point's blob holds two
+        two[cs, rs] = (span >= cfg.ends_min_px) & ((caps > 1) | (span >= cfg.elongated_px))  # NaN moments: False
+        sep_of = {(int(c), int(b)): sp for c, b, sp in zip(cs.tolist(), bs.tolist(), sep)}
 
         def ends(key: tuple[int, int]) -> np.ndarray:
-            return end_px[key[0]][key[1]]
+            """(2, 2) px: the blob's centroid -+ half the separation."""
+            return views[key[0]].uv[key[1]][None, :] + np.array([0.5, -0.5])[:, None] * sep_of[key][None, :]
 
-        sub_blob = blob[:, idx]
-        two = np.zeros(capb.shape, bool)  # (C, len(idx)) views where the point's blob holds two
-        for c in range(self.C):
-            has = sub_blob[c] >= 0
-            two[c, has] = holds_two[c][sub_blob[c, has]]
         one = (capb == 1) & ~two
         # each point's choice of ends: (view, blob) -> (end, px from its projection)
         choice: dict[int, dict[tuple[int, int], tuple[int, float]]] = {}
@@ -508,7 +569,7 @@ class PointReconstructor:
                 uv[key[0], k] = ends(key)[j]
                 moved.add(k)
             done.add(key)
-        for r in np.flatnonzero(np.isin(idx, list(moved))):
+        for r in np.flatnonzero(np.isin(idx, list(moved))) if moved else ():
             k = int(idx[r])
             res = self._triangulate_views(uv, k, list(np.flatnonzero(blob[:, k] >= 0)))
             if res.n_views[0] >= 2 and self.plausible(res.points)[0]:
@@ -532,7 +593,7 @@ class PointReconstructor:
         # the other marker of a point on ends, with no point of its own (hidden wherever it is
         # not merged with that point): a new point on the free ends of >= 2 views
         new: list[tuple[np.ndarray, float, np.ndarray, np.ndarray]] = []
-        for r in np.flatnonzero(np.isin(idx, list(moved))):
+        for r in np.flatnonzero(np.isin(idx, list(moved))) if moved else ():
             k = int(idx[r])
             cs = [int(c) for c in range(self.C) if blob[c, k] >= 0 and (int(c), int(blob[c, k])) in free_end]
             if len(cs) < 2:
@@ -731,6 +792,7 @@ class PointReconstructor:
                                                     np.nan_to_num(err[idx], nan=1e9).tolist(), idx.tolist())]
         heapq.heapify(heap)
         keep: list[int] = []
+        kept: list[tuple[float, float, float]] = []  # their positions (m): accepted points are not moved again
         while heap:
             k = heapq.heappop(heap)[3]
             row = rows[k]
@@ -745,11 +807,13 @@ class PointReconstructor:
                 rows[k] = blob[:, k].tolist()
                 heapq.heappush(heap, (-int(n_views[k]), int(penalty[k]), float(err[k]), k))
                 continue
-            if keep and np.min(np.linalg.norm(X[keep] - X[k], axis=1)) < cfg.min_separation_m:
+            x, y, z = X[k].tolist()
+            if kept and _too_close(kept, x, y, z, cfg.min_separation_m):
                 continue
             for c in cs:
                 capl[c][row[c]] -= 1
             keep.append(k)
+            kept.append((x, y, z))
             if len(keep) >= cfg.max_points:
                 break
         return keep, capl

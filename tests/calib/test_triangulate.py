@@ -123,3 +123,31 @@ def test_two_views_from_one_centre_give_nan_not_an_error() -> None:
     res = Triangulator(rig).triangulate(np.array([[[80.0, 60.0], [90.0, 61.0]], [[80.0, 60.0], [90.0, 61.0]]]))
     assert res.points.shape == (2, 3) and list(res.n_views) == [0, 0]
     assert np.isnan(res.points).all()
+
+
+@pytest.mark.parametrize("distorted", [True, False])
+def test_rig_projection_and_undistortion_agree_with_each_cameras_model(distorted: bool) -> None:
+    """The compiled rig-wide lens model the labelling uses every frame gives each camera's own
+    pixels (Camera.project), NaN behind a camera, and undistorts them back to that camera's
+    normalised coordinates (the table to ~1e-4 px; NaN for NaN and far outside the image)."""
+    rig = default_rig(4)
+    if not distorted:
+        rig = CameraRig([Camera(c.name, c.size, c.matrix, np.zeros(5), c.rvec, c.tvec) for c in rig.cameras])
+    tri = Triangulator(rig)
+    rng = np.random.default_rng(5)
+    X = np.vstack([_points(rng, 200), rig.cameras[0].center + [0.0, 0.0, 0.0], [np.nan, 0.0, 1.0]])
+    uv, depth = tri.project(X)
+    for c, cam in enumerate(rig.cameras):
+        front = (cam.R @ (X - cam.center).T)[2] > 1e-9
+        np.testing.assert_allclose(uv[c, front], cam.project(X[front]), atol=1e-9)
+        assert np.isnan(uv[c, ~front]).all()
+    assert np.isnan(uv[:, -1]).all() and np.isnan(depth[:, -1]).all()
+    pix = uv[:, :200]  # inside or near the images
+    pix[0, :3] = [np.nan, 5.0], [-50.0, 60.0], [80.0, 1e6]  # NaN, far outside the table
+    xy = tri.undistort_normalized(pix)
+    exact = tri.undistort_normalized_exact(pix)
+    usable = np.isfinite(xy).all(axis=2)
+    assert not usable[0, 0] and (not usable[0, 1:3].any()) == distorted  # the table ends past the image
+    assert usable.sum() > 0.9 * usable.size
+    px = (xy - exact)[usable] * tri.K[np.nonzero(usable)[0], 0, 0][:, None]  # (M, 2) px
+    assert np.abs(px).max() < (1e-3 if distorted else 1e-12)

@@ -11,7 +11,7 @@ import pytest
 
 from samba_common.calib import default_rig
 from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT
-from samba_common.wire import FLAG_TRACKED, UNLABELLED, MarkerPacket
+from samba_common.wire import FLAG_LOST, FLAG_MERGED, FLAG_PREDICTED, FLAG_TRACKED, UNLABELLED, MarkerPacket
 from samba_mote.sim.motion import DEFAULT_LENGTHS, synthetic_motion
 from samba_mote.sim.tpose import stance_offset, tpose
 from samba_server.labelling import Labeller
@@ -42,6 +42,40 @@ def _packets(rig, markers, t, rng, labels=None, distractors=None, noise_px=0.1, 
         out.append(MarkerPacket(cam.name, 0, int(t * 1e9), 160, 120, 100, lab, uv.astype(np.float32),
                                 np.full(len(uv), 9, np.uint16), flags))
     return out
+
+
+def test_a_packets_records_become_each_measured_blob_once_with_its_capacity_and_hint() -> None:
+    """What the 3D stage takes from a mote's packet: each measured blob once (a merged blob the
+    tracker repeats per marker, the repeats' labels no single hint), predictions, lost tracks,
+    empty and NaN records skipped; two markers' capacity for a flagged merge, a repeat or an
+    area twice the view's typical; beyond ``max_blobs`` the largest blobs dropped."""
+    rows = [  # (u, v, label, area, flags)
+        (10.0, 10.0, 0, 12, FLAG_TRACKED),                 # a labelled single marker
+        (20.0, 20.0, 1, 12, FLAG_MERGED),                  # one merged blob, repeated for two markers
+        (20.0, 20.0, 2, 12, FLAG_MERGED),
+        (30.0, 30.0, 3, 12, FLAG_PREDICTED),               # the tracker's guess, not measured
+        (40.0, 40.0, 4, 12, FLAG_LOST),
+        (50.0, 50.0, UNLABELLED, 0, 0),                    # no area: nothing measured
+        (np.nan, 60.0, UNLABELLED, 12, 0),
+        (70.0, 70.0, UNLABELLED, 30, 0),                   # 2.5x the typical area: two markers
+        (80.0, 80.0, 5, 11, FLAG_TRACKED),
+        (90.0, 90.0, 6, 13, FLAG_TRACKED),
+    ]
+    u, v, lab, area, flags = (np.array(c) for c in zip(*rows))
+    pkt = MarkerPacket("cam0", 1, 0, 160, 120, 128, lab.astype(np.uint8), np.c_[u, v].astype(np.float32),
+                       area.astype(np.uint16), flags.astype(np.uint8), np.arange(3 * len(u)).reshape(-1, 3))
+    vb = view_blobs(pkt)
+    assert vb.uv.tolist() == [[10, 10], [20, 20], [70, 70], [80, 80], [90, 90]]  # by position
+    assert vb.capacity.tolist() == [1, 2, 2, 1, 1]
+    assert vb.hint.tolist() == [0, -1, -1, 5, 6]
+    np.testing.assert_allclose(vb.radius, np.sqrt(np.array([12, 12, 30, 11, 13]) / np.pi))
+    assert vb.moments[:, 0].tolist() == [0, 3, 21, 24, 27]  # the first record of each blob
+    few = view_blobs(pkt, max_blobs=3)  # the largest two (the merged 30 px one, a 13 px one) go
+    assert few.uv.tolist() == [[10, 10], [20, 20], [80, 80]] and few.capacity.tolist() == [1, 2, 1]
+    assert len(view_blobs(None)) == 0
+    assert len(view_blobs(MarkerPacket("cam0", 1, 0, 160, 120, 128, lab[3:5].astype(np.uint8),
+                                       np.c_[u, v][3:5].astype(np.float32), area[3:5].astype(np.uint16),
+                                       flags[3:5].astype(np.uint8)))) == 0
 
 
 def _run(labeller, rig, markers, rng, **kw):
