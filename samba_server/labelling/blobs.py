@@ -72,14 +72,13 @@ def view_blobs(packet, merged_area_ratio: float = 1.5, max_blobs: int = 40) -> V
     if packet is None or len(packet) == 0:
         return ViewBlobs.empty()
     uv = np.ascontiguousarray(np.asarray(packet.uv, float).reshape(-1, 2))
-    rows, merged, hint = _distinct_blobs(np.ascontiguousarray(packet.flags, np.int64),
-                                         np.ascontiguousarray(packet.area, float), uv,
+    area = np.ascontiguousarray(packet.area, float)
+    rows, merged, hint = _distinct_blobs(np.ascontiguousarray(packet.flags, np.int64), area, uv,
                                          np.ascontiguousarray(packet.labels, np.int64), float(merged_area_ratio),
                                          int(max_blobs))
     if not len(rows):
         return ViewBlobs.empty()
-    area = np.asarray(packet.area, float)[rows]
-    return ViewBlobs(uv[rows], np.where(merged, 2, 1), np.sqrt(area / np.pi), hint,
+    return ViewBlobs(uv[rows], np.where(merged, 2, 1), np.sqrt(area[rows] / np.pi), hint,
                      np.asarray(packet.moments, float).reshape(-1, 3)[rows])
 
 

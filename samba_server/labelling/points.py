@@ -868,16 +868,19 @@ class PointReconstructor:
         (:meth:`_split_rough`), then, for each view where s took a single marker's blob that
         another candidate uses too, with s less that view appended (:meth:`_less_view`). Yields
         (X, err, n_views, blob), ok, penalty, uv, missing, and whether the set is of the last kind."""
+        def grown(new: tuple, less: bool) -> tuple:
+            """The candidates with new ones appended (X, err, n_views, blob, uv, unexplained views)."""
+            Xn, en, nn, bn, uvn, mn = new
+            return ((np.vstack([fresh[0], Xn]), np.r_[fresh[1], en], np.r_[fresh[2], nn], np.hstack([fresh[3], bn])),
+                    np.r_[ok, np.ones(len(Xn), bool)], np.r_[penalty, mn], np.concatenate([uv, uvn], axis=1),
+                    np.r_[missing, mn], less)
+
         yield fresh, ok, penalty, uv, missing, False
         split = self._split_rough(s, fresh, uv, views)
         if split is not None:
-            Xn, en, nn, bn, uvn, mn = split
-            yield ((np.vstack([fresh[0], Xn]), np.r_[fresh[1], en], np.r_[fresh[2], nn], np.hstack([fresh[3], bn])),
-                   np.r_[ok, True, True], np.r_[penalty, mn], np.concatenate([uv, uvn], axis=1), np.r_[missing, mn],
-                   False)
-        for Xn, en, nn, bn, uvn, mn in self._less_view(s, fresh, ok, uv, missing, views):
-            yield ((np.vstack([fresh[0], Xn]), np.r_[fresh[1], en], np.r_[fresh[2], nn], np.hstack([fresh[3], bn])),
-                   np.r_[ok, True], np.r_[penalty, mn], np.concatenate([uv, uvn], axis=1), np.r_[missing, mn], True)
+            yield grown(split, False)
+        for less in self._less_view(s, fresh, ok, uv, missing, views):
+            yield grown(less, True)
 
     def _less_view(self, s: int, fresh: tuple, ok: np.ndarray, uv: np.ndarray, missing: np.ndarray,
                    views: list[ViewBlobs]):
