@@ -76,6 +76,7 @@ class PointsConfig:
     ends_min_px: float = 1.0  #: a merged blob whose moments part its markers by less is used by its centroid
     rough_px: float = 0.3  #: an accepted >= 4-view point this rough is checked for a ghost (``_unghost``)
     elongated_px: float = 2.0  #: a blob of a single marker's size whose moments part two markers by this much holds two
+    split_fit_ratio: float = 0.33  #: a rough point that fits within rough_px and this share of its error less one view is one marker with a bad view: not split
 
 
 @dataclass
@@ -190,6 +191,20 @@ def _more_sure(keep: list[int], n_views: np.ndarray, err: np.ndarray, keep2: lis
     rough = float(np.max(np.nan_to_num(err[only], nan=np.inf)))
     return (int(sure2.sum()) > int(sure.sum()) and int(n2[keep2][sure2].sum()) >= int(n_views[keep][sure].sum())
             and float(np.max(np.nan_to_num(e2[only2], nan=np.inf))) <= rough)
+
+
+def _same_ghost(blob: np.ndarray, n_views: np.ndarray, s: int) -> np.ndarray:
+    """(K,) bool: the candidates other than s seen by >= 3 views, all of them with s's blobs
+    (blob (C, K), -1 = none; n_views (K,)): s less a view, which a split of s must not compete
+    with. Two ankles each hidden from the two cameras that see the other made a 4-view ghost
+    (0.66 px) and a 3-view one of three of its blobs (0.58 px); ranked first by its views, the
+    3-view one took the blobs of the split's two points, and an ankle went unnamed for 0.3 s
+    (006_11 seed 601)."""
+    own = blob[:, s:s + 1]
+    used = blob >= 0
+    subset = (~used | (blob == own)).all(axis=0) & (n_views >= 3)
+    subset[s] = False
+    return subset
 
 
 @njit(cache=True)
@@ -831,7 +846,9 @@ class PointReconstructor:
         When that fails, the acceptance is run again with the point replaced by the two points
         of its views' split (:meth:`_split_rough`): two markers, each hidden from the views that
         see the other, have no candidate of their own (each one's pair of views is supported by
-        the other's blobs and grows into the rough point). Then with the point less one view
+        the other's blobs and grows into the rough point); that run leaves out the point less a
+        view (:func:`_same_ghost`) and does not count the views the split's points leave
+        unexplained (each marker's hiding). Then with the point less one view
         whose blob another marker needs (:meth:`_less_view`), taken when it keeps as many points,
         as many of them seen by >= 3 views, and leaves fewer views unexplained.
         ``accepted``: X, err, n_views, blob after the first acceptance; uv (C, K, 2), missing
@@ -842,7 +859,7 @@ class PointReconstructor:
         for s in sorted((k for k in keep if n_views[k] >= 4 and err[k] > cfg.rough_px), key=lambda k: -err[k]):
             if s not in keep:
                 continue
-            for cand, ok2, penalty2, uv2, missing2, less in self._without(s, fresh, ok, penalty, uv, missing, views):
+            for cand, ok2, penalty2, uv2, missing2, kind in self._without(s, fresh, ok, penalty, uv, missing, views):
                 trial = tuple(a.copy() for a in cand)
                 without = ok2.copy()
                 without[s] = False
@@ -851,9 +868,12 @@ class PointReconstructor:
                 fewer_errors = (n2[keep2].sum() >= n_views[keep].sum()
                                 and e2[keep2].sum() <= err[keep].sum() - cfg.rough_px)
                 # s less a view: as many points, as many of them sure, fewer views unexplained
-                explains = less and len(keep2) >= len(keep) and missing2[keep2].sum() < missing[keep].sum() \
+                explains = kind == "less" and len(keep2) >= len(keep) and missing2[keep2].sum() < missing[keep].sum() \
                     and np.count_nonzero(n2[keep2] >= 3) >= np.count_nonzero(n_views[keep] >= 3)
-                if missing2[keep2].sum() <= missing[keep].sum() \
+                # a split's two markers are each hidden from views that see the other: the views
+                # its points leave unexplained are that hiding, not a ghost's
+                hidden = int(sum(missing2[k] for k in keep2 if k >= len(fresh[0]))) if kind == "split" else 0
+                if missing2[keep2].sum() - hidden <= missing[keep].sum() \
                         and (fewer_errors or explains or _more_sure(keep, n_views, err, keep2, n2, e2)):
                     keep, capl, ok, penalty, uv, missing, fresh = keep2, capl2, without, penalty2, uv2, missing2, cand
                     X, err, n_views, blob = trial
@@ -867,20 +887,21 @@ class PointReconstructor:
         that outcome was not taken) with the two points of its split appended
         (:meth:`_split_rough`), then, for each view where s took a single marker's blob that
         another candidate uses too, with s less that view appended (:meth:`_less_view`). Yields
-        (X, err, n_views, blob), ok, penalty, uv, missing, and whether the set is of the last kind."""
-        def grown(new: tuple, less: bool) -> tuple:
-            """The candidates with new ones appended (X, err, n_views, blob, uv, unexplained views)."""
+        (X, err, n_views, blob), ok, penalty, uv, missing, and the kind of set ("plain", "split" or "less")."""
+        def grown(new: tuple, kind: str, base: np.ndarray) -> tuple:
+            """The candidates with new ones appended (X, err, n_views, blob, uv, unexplained views),
+            those of base (K,) bool allowed."""
             Xn, en, nn, bn, uvn, mn = new
             return ((np.vstack([fresh[0], Xn]), np.r_[fresh[1], en], np.r_[fresh[2], nn], np.hstack([fresh[3], bn])),
-                    np.r_[ok, np.ones(len(Xn), bool)], np.r_[penalty, mn], np.concatenate([uv, uvn], axis=1),
-                    np.r_[missing, mn], less)
+                    np.r_[base, np.ones(len(Xn), bool)], np.r_[penalty, mn], np.concatenate([uv, uvn], axis=1),
+                    np.r_[missing, mn], kind)
 
-        yield fresh, ok, penalty, uv, missing, False
+        yield fresh, ok, penalty, uv, missing, "plain"
         split = self._split_rough(s, fresh, uv, views)
         if split is not None:
-            yield grown(split, False)
+            yield grown(split, "split", ok & ~_same_ghost(fresh[3], fresh[2], s))
         for less in self._less_view(s, fresh, ok, uv, missing, views):
-            yield grown(less, True)
+            yield grown(less, "less", ok)
 
     def _less_view(self, s: int, fresh: tuple, ok: np.ndarray, uv: np.ndarray, missing: np.ndarray,
                    views: list[ViewBlobs]):
@@ -925,7 +946,10 @@ class PointReconstructor:
         """Two candidates for the rough candidate s (>= 4 views): the split of its views into two
         sets of >= 2 whose triangulations fit within ``rough_px`` together (the best such split)
         and lie ``min_separation_m`` apart, when no view left out makes the rest fit within
-        ``rough_px`` (one marker with one bad view is not two markers), its blobs are all single
+        ``rough_px`` and ``split_fit_ratio`` of its error (one marker with one bad view is not two
+        markers: its other views fit within noise, a shoulder whose blob a wrist skewed in one
+        view 0.52 -> 0.11 px, where two ankles 4.5 cm apart went 0.40 -> 0.18 px and the right
+        one had no point for 11 frames, 006_10 seed 602), its blobs are all single
         markers' and it has at most 6 views (at most 25 splits). Two ankles 7 cm apart,
         each hidden by the other leg from the two cameras that see the other, project within
         1-1.5 px of each other everywhere: the four views made one 4-view point between them
@@ -942,7 +966,7 @@ class PointReconstructor:
             return None
         for c in cams:
             rest = self._triangulate_views(uv, s, [x for x in cams if x != c])
-            if rest.n_views[0] == n - 1 and rest.error[0] <= cfg.rough_px:
+            if rest.n_views[0] == n - 1 and rest.error[0] <= min(cfg.rough_px, cfg.split_fit_ratio * fresh[1][s]):
                 return None
         best = None
         for size in range(2, n - 1):
