@@ -219,6 +219,8 @@ class Labeller:
         self._t_ambiguous: float | None = None
         #: (since, last frame's time, (8, 3) markers) of an unclear identification's best labelling
         self._steady: tuple[float, float, np.ndarray] | None = None
+        #: (time, (8, 3) markers) of the last identification's best labelling
+        self._best_prev: tuple[float, np.ndarray] | None = None
         self._shared = np.zeros(N_MARKERS, bool)
         self._together: dict[tuple[int, int], float] = {}  # (m, n) markers -> when they last shared a point
         self._views: list = []  # this frame's blobs per camera (ViewBlobs)
@@ -312,7 +314,7 @@ class Labeller:
         self._skel = []
         self._facing = None
         self._t_lost = self._t_ambiguous = None
-        self._steady = None
+        self._steady = self._best_prev = None
         self._reset_timers()
         self._free_hist = []
         self._on_point[:] = -np.inf
@@ -1505,20 +1507,26 @@ class Labeller:
         hint = self._hint(t)
         if len(self.rig) >= 3:  # with two, ghosts cross legs as often (a dance 43 -> 24 %)
             hint.crossed = self._crossed_before(t)
-        hyps = identify(pts.X, self._trust(pts, not self._body.measured), self._raised(pts), hint,
-                        shared=pts.merged_all)
+        trust = self._trust(pts, not self._body.measured)
+        hyps = identify(pts.X, trust, self._raised(pts), hint, shared=pts.merged_all)
         if not hyps:
             self._t_ambiguous = self._steady = None
             return None
         best = hyps[0]
         margin = best.score - hyps[1].score if len(hyps) > 1 else best.score
         labels = best.labels.copy()
+        prev, self._best_prev = self._best_prev, (t, self._named(pts, best.labels, best.facing))
         if margin < cfg.min_margin:
             # name at once what every close runner-up agrees on (e.g. all but an ankle pair
-            # whose order is unclear); the rest waits for the tracking and the skeleton
+            # whose order is unclear; with a shoulder on a point that may be a ghost, only if
+            # the frame before's best labelling named them at the same places); the rest waits
+            # for the tracking and the skeleton
             close = [h for h in hyps[1:] if best.score - h.score < cfg.min_margin]
             labels[_disputed(best.labels, close)] = -1
-            if (labels[[LS, RS]] < 0).any() or np.count_nonzero(labels >= 0) < cfg.min_points:
+            partial = not ((labels[[LS, RS]] < 0).any() or np.count_nonzero(labels >= 0) < cfg.min_points)
+            if partial and (trust[labels[[LS, RS]]] > 0).any():
+                partial = self._agrees(prev, self._named(pts, labels, best.facing))
+            if not partial:
                 if self._t_ambiguous is None:
                     self._t_ambiguous = t
                 steady = len(self.rig) >= 3 and t - self._steady_since(pts, best, t) >= cfg.steady_s - 1e-6
@@ -1540,6 +1548,24 @@ class Labeller:
         log.info("t=%.3f s: markers identified from %d points (%d named, margin %.2f)", t, len(pts),
                  int(named.sum()), margin)
         return out, LabelQuality(int(named.sum()), len(pts), 0.1 * margin, 0.0, "identified", 0)
+
+    def _agrees(self, prev: tuple[float, np.ndarray] | None, named: np.ndarray) -> bool:
+        """Whether an unclear identification's agreed names named (8, 3) m (NaN = left out) are
+        where the frame before's best labelling prev (time, (8, 3) m) named them, within
+        ``gate_m`` (always, with two cameras). Asked when a shoulder is named on a point that
+        may be a ghost (fewer than three views, one missing it). Back from a blackout with the
+        hands held together at shoulder height (a swordplay, seed 601 002_07), one frame's
+        points lacked a shoulder (a 2-view point 14 cm off) and every close labelling agreed on
+        a 2-view ghost by the hands and the left shoulder as the shoulders; named at once, the
+        wrong names were tracked for 2.2 s. The frame before, the best labelling had named the
+        shoulders right."""
+        if len(self.rig) < 3:
+            return True
+        if prev is None or prev[0] < self._t_prev - 1e-6:
+            return False
+        on = np.isfinite(named).all(axis=1)
+        d = np.linalg.norm(named[on] - prev[1][on], axis=1)
+        return bool(np.isfinite(d).all() and (d <= self.config.gate_m).all())
 
     def _raised(self, pts: Points3D) -> Body:
         """The body for identifying afresh: its shoulders' ceiling raised by the height of the
