@@ -104,21 +104,33 @@ def _ankle_above_knee(X: np.ndarray, k: int, a: int) -> bool:
     return bool(X[a, 2] > X[k, 2] + 0.1)
 
 
-def _leg_penalty(X: np.ndarray, s: np.ndarray, k: int, a: int, body: Body) -> float | None:
+def _distances(X: np.ndarray, idx: list[int]) -> np.ndarray:
+    """(M, M) distance (m) between the points idx of X (M, 3), each as ``np.linalg.norm`` of
+    their difference gives it (NaN for the points not in idx)."""
+    D = np.full((len(X), len(X)), np.nan)
+    for n, i in enumerate(idx):
+        D[i, i] = 0.0
+        for j in idx[n + 1:]:
+            D[i, j] = D[j, i] = float(np.linalg.norm(X[i] - X[j]))
+    return D
+
+
+def _leg_penalty(X: np.ndarray, D: np.ndarray, s: int, k: int, a: int, body: Body) -> float | None:
     """Penalty of knee point k and ankle point a (-1 = unnamed) for the side whose shoulder is
-    at s (3,), or None when the rigid lengths do not allow them."""
+    point s, or None when the rigid lengths do not allow them. D: :func:`_distances`."""
     reach_k = body.trunk + 2 * body.tol
     reach_a = reach_k + body.shin
+    top = X[s, 2]
     if k < 0:
         if a < 0:
             return 0.0
-        if np.linalg.norm(X[a] - s) > reach_a or X[a, 2] >= s[2] - 0.6:
+        if D[a, s] > reach_a or X[a, 2] >= top - 0.6:
             return None
         # an ankle whose knee is not named stays near the floor: a point at knee height named
         # an ankle (leaving the real ankle below it unnamed) costs
         return _HIGH_ANKLE_W * max(0.0, float(X[a, 2]) - _HIGH_ANKLE_M)
-    dk = float(np.linalg.norm(X[k] - s))
-    if dk > reach_k or X[k, 2] > s[2] - 0.2:
+    dk = D[k, s]
+    if dk > reach_k or X[k, 2] > top - 0.2:
         return None
     # the knee hangs about a trunk (torso + thigh) below its shoulder: much nearer takes a
     # deep crouch, or a wrist taken for the shoulder
@@ -127,27 +139,27 @@ def _leg_penalty(X: np.ndarray, s: np.ndarray, k: int, a: int, body: Body) -> fl
         return near
     if a == k or _ankle_above_knee(X, k, a):
         return None
-    err = body.shin_error(X[k], X[a])
-    if err > body.tol or np.linalg.norm(X[a] - s) > reach_a:
+    err = abs(D[k, a] - body.shin)
+    if err > body.tol or D[a, s] > reach_a:
         return None
     return near + 0.3 * (err / body.tol) ** 2
 
 
-def _leg_options(X: np.ndarray, free: list[int], s: np.ndarray, body: Body) -> list[tuple[int, int, float]]:
-    """(knee, ankle, penalty) options for the side whose shoulder is at s: pairs a shin apart,
-    single points, or nothing."""
+def _leg_options(X: np.ndarray, D: np.ndarray, free: list[int], s: int, body: Body) -> list[tuple[int, int, float]]:
+    """(knee, ankle, penalty) options for the side whose shoulder is point s: pairs a shin
+    apart, single points, or nothing. D: :func:`_distances`."""
     out: list[tuple[int, int, float]] = [(-1, -1, 0.0)]
     for k in free:
-        pen_k = _leg_penalty(X, s, k, -1, body)
+        pen_k = _leg_penalty(X, D, s, k, -1, body)
         if pen_k is None:
             continue
         out.append((k, -1, pen_k))
         for a in free:
-            pen = _leg_penalty(X, s, k, a, body)
+            pen = _leg_penalty(X, D, s, k, a, body)
             if pen is not None:
                 out.append((k, a, pen))
     for a in free:
-        pen_a = _leg_penalty(X, s, -1, a, body)
+        pen_a = _leg_penalty(X, D, s, -1, a, body)
         if pen_a is not None:
             out.append((-1, a, pen_a))
     return out
@@ -278,9 +290,21 @@ def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = N
     M = len(X)
     if M < 2:
         return []
-    idx = list(np.argsort(trust, kind="stable")[:max_points])
+    idx = [int(i) for i in np.argsort(trust, kind="stable")[:max_points]]
+    D = _distances(X, idx)
     hyps: dict[tuple, Hypothesis] = {}
     lowest = float(X[:, 2].min())
+    # a shoulder's leg options with the body as it is (a measured subject), over every other
+    # point: a pair of shoulders takes those that do not use the other shoulder
+    options: dict[int, list[tuple[int, int, float]]] = {}
+
+    def legs(s: int, other: int, free: list[int], pb: Body) -> list[tuple[int, int, float]]:
+        if pb is not body:
+            return _leg_options(X, D, free, s, pb)
+        if s not in options:
+            options[s] = _leg_options(X, D, [p for p in idx if p != s], s, pb)
+        return [o for o in options[s] if o[0] != other and o[1] != other]
+
     for i, j in combinations(idx, 2):
         for L, R in ((i, j), (j, i)):
             pb = sized(body, X[L], X[R], lowest)
@@ -289,26 +313,28 @@ def identify(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None = N
                 continue
             base, f = sh
             free = [p for p in idx if p not in (L, R)]
-            legs_l = _leg_options(X, free, X[L], pb)
-            legs_r = _leg_options(X, free, X[R], pb)
+            legs_l = legs(L, R, free, pb)
+            legs_r = legs(R, L, free, pb)
             pairs = [p for p in (_legs_score(X, trust, L, R, ol, orr, f, shared, hint) for ol in legs_l for orr in legs_r)
                      if p is not None]
             pairs.sort(key=lambda p: -p[0])
+            lim = pb.reach + pb.tol
             for sc, kl, al, kr, ar in pairs[:legs_kept]:
                 taken = {L, R, kl, al, kr, ar}
                 rest = [p for p in free if p not in taken]
-                wl = [-1] + [p for p in rest if np.linalg.norm(X[p] - X[L]) <= pb.reach + pb.tol]
-                wr = [-1] + [p for p in rest if np.linalg.norm(X[p] - X[R]) <= pb.reach + pb.tol]
+                wl = [-1] + [p for p in rest if D[p, L] <= lim]
+                wr = [-1] + [p for p in rest if D[p, R] <= lim]
                 for a in wl:
                     for b in wr:
                         if a >= 0 and a == b:
                             continue
                         s = base + sc + _wrists_score(X, trust, L, R, a, b, f, hint)
-                        labels = np.full(8, -1, np.int64)
-                        labels[[LS, RS, LW, RW, LK, RK, LA, RA]] = (L, R, a, b, kl, kr, al, ar)
-                        key = tuple(labels)
+                        key = [-1] * 8
+                        key[LS], key[RS], key[LW], key[RW], key[LK], key[RK], key[LA], key[RA] = \
+                            L, R, a, b, kl, kr, al, ar
+                        key = tuple(key)
                         if key not in hyps or hyps[key].score < s:
-                            hyps[key] = Hypothesis(labels, float(s), f)
+                            hyps[key] = Hypothesis(np.array(key, np.int64), float(s), f)
     out = sorted(hyps.values(), key=lambda h: -h.score)
     return out[:keep]
 
@@ -330,11 +356,12 @@ def score_labels(X: np.ndarray, trust: np.ndarray, body: Body, hint: Hint | None
     if sh is None:
         return None
     base, f = sh
+    D = _distances(X, sorted({int(p) for p in labels if p >= 0}))
 
     def options(s: int, k: int, a: int) -> list[tuple[int, int, float]]:
         out = []
         for kk, aa in {(k, a), (k, -1), (-1, a), (-1, -1)}:
-            pen = _leg_penalty(X, X[s], kk, aa, body)
+            pen = _leg_penalty(X, D, s, kk, aa, body)
             if pen is not None:
                 out.append((kk, aa, pen))
         return out
