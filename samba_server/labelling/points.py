@@ -516,7 +516,9 @@ class PointReconstructor:
         marker's size, its moments part two by >= ``elongated_px`` (two overlapping markers).
 
         - A point with single-marker views takes, in each two-marker view, one end: with >= 2
-          single views, the end nearest its projection from those (within ``support_px``);
+          single views, the end nearest its projection from those (within ``support_px``;
+          a two-marker blob whose ends and centroid all lie farther holds two other markers,
+          the point's own hidden there: the point drops that view);
           with one, the combination of ends that triangulates best (>= 3 views, within
           ``epipolar_px``). An end is taken only where it fits better than the centroid (a
           single marker blurred by motion is elongated too, and its centroid is right). Two
@@ -554,19 +556,23 @@ class PointReconstructor:
         one = (capb == 1) & ~two
         # each point's choice of ends: (view, blob) -> (end, px from its projection)
         choice: dict[int, dict[tuple[int, int], tuple[int, float]]] = {}
+        moved: set[int] = set()
         for r in np.flatnonzero(one.any(axis=0) & two.any(axis=0)):
             k = int(idx[r])
             keys = [(int(c), int(blob[c, k])) for c in np.flatnonzero(two[:, r])]
-            got = self._choose_ends(k, list(np.flatnonzero(one[:, r])), keys, uv, [ends(key) for key in keys])
+            got, alien = self._choose_ends(k, list(np.flatnonzero(one[:, r])), keys, uv, [ends(key) for key in keys])
             if got:
                 choice[k] = got
+            for c, _b in alien:  # a two-marker blob that holds two others: not this point's
+                blob[c, k] = -1
+                uv[c, k] = np.nan
+                moved.add(k)
         # one end per point on a shared blob
         users: dict[tuple[int, int], list[int]] = {}
         for k, got in choice.items():
             for key in got:
                 users.setdefault(key, []).append(k)
         free_end: dict[tuple[int, int], int] = {}
-        moved: set[int] = set()
         done: set[tuple[int, int]] = set()
         for key, ks in users.items():
             if len(ks) > 2:
@@ -631,22 +637,30 @@ class PointReconstructor:
         return done, placed, new
 
     def _choose_ends(self, k: int, singles: list[int], keys: list[tuple[int, int]], uv: np.ndarray,
-                     ends: list[np.ndarray]) -> dict[tuple[int, int], tuple[int, float]]:
+                     ends: list[np.ndarray]) -> tuple[dict[tuple[int, int], tuple[int, float]], list[tuple[int, int]]]:
         """Which end of each of candidate k's two-marker blobs (keys: (view, blob); ends: (2, 2)
         px each) is its marker, given its single-marker views: {(view, blob): (end, px from the
-        point's projection)}, empty when unclear (see :meth:`_to_ends`). uv: (C, K, 2) px."""
+        point's projection)}, empty when unclear (see :meth:`_to_ends`); and, with >= 2 single
+        views, the two-marker blobs whose centroid and ends all lie more than ``support_px``
+        from where those views put the marker: two other markers' blob (the marker hidden in
+        that view), which pulled the point (a shoulder hidden behind two hands together there:
+        10 cm off, 002_07 seed 601). uv: (C, K, 2) px."""
         cfg = self.config
         got: dict[tuple[int, int], tuple[int, float]] = {}
+        alien: list[tuple[int, int]] = []
         if len(singles) >= 2:
             res = self._triangulate_views(uv, k, singles)
             if res.n_views[0] < 2:
-                return got
+                return got, alien
             proj = self.tri.project(res.points)[0][:, 0]  # (C, 2)
             for (c, b), e in zip(keys, ends):
                 d = np.linalg.norm(e - proj[c], axis=1)
                 j = int(np.argmin(d))
-                if d[j] <= cfg.support_px and d[j] < float(np.linalg.norm(uv[c, k] - proj[c])):
+                centre = float(np.linalg.norm(uv[c, k] - proj[c]))
+                if d[j] <= cfg.support_px and d[j] < centre:
                     got[(c, b)] = (j, float(d[j]))
+                elif d[j] > cfg.support_px and centre > cfg.support_px:
+                    alien.append((c, b))
         elif len(keys) >= 2:
             # one single view: the ends that meet best, every combination and the centroids in one call
             cams = singles + [c for c, _b in keys]
@@ -659,11 +673,11 @@ class PointReconstructor:
             err = np.where(res.n_views[:-1] == len(cams), res.error[:-1], np.inf)
             i = int(np.argmin(err))
             if not (err[i] <= cfg.epipolar_px and err[i] < res.error[-1]):
-                return got
+                return got, alien
             proj = self.tri.project(res.points[i:i + 1])[0][:, 0]
             for (c, b), e, j in zip(keys, ends, combos[i]):
                 got[(c, b)] = (int(j), float(np.linalg.norm(e[j] - proj[c])))
-        return got
+        return got, alien
 
     def _unshare(self, idx: np.ndarray, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray,
                  uv: np.ndarray, resolved: set[tuple[int, int]] = frozenset()) -> None:

@@ -564,10 +564,15 @@ def test_a_stance_turned_against_the_shoulders_keeps_its_names_when_a_knee_comes
 
 def _views_from_blobs(blobs: list) -> list:
     """ViewBlobs per camera from per-camera blob lists [[u, v, capacity, radius (px)], ...] (a
-    traced frame of a rendered take; no hints, no moments)."""
+    traced frame of a rendered take; no hints), each blob optionally followed by its three
+    second moments (px^2, as the packet carries them; else none)."""
     from samba_server.labelling.blobs import ViewBlobs
-    return [ViewBlobs(np.array(b)[:, :2], np.array(b)[:, 2].astype(np.int64), np.array(b)[:, 3],
-                      np.full(len(b), -1, np.int64), np.full((len(b), 3), np.nan)) for b in blobs]
+    out = []
+    for b in blobs:
+        a = np.array(b)
+        moments = a[:, 4:7] if a.shape[1] >= 7 else np.full((len(b), 3), np.nan)
+        out.append(ViewBlobs(a[:, :2], a[:, 2].astype(np.int64), a[:, 3], np.full(len(b), -1, np.int64), moments))
+    return out
 
 
 def _server_triangulator(rig) -> Triangulator:
@@ -888,6 +893,41 @@ def test_two_ankles_a_step_apart_are_split_though_part_of_the_ghost_fits(case):
     assert (dist.min(axis=0) < 0.01).all(), dist.min(axis=0)
     assert dist.argmin(axis=0)[0] != dist.argmin(axis=0)[1]
     assert (got.n_views[dist.argmin(axis=0)] == 2).all()
+
+def test_a_shoulder_hidden_behind_two_hands_is_not_pulled_to_their_merged_blob(monkeypatch):
+    """Blobs of a rendered take with their moments (002_07 seed 601, frame 115, traced): the
+    right shoulder, seen apart in two views, is hidden in a third behind two hands together,
+    whose merged blob lies 3 px from its projection. With that blob, whose ends both lie
+    farther, its point was triangulated 10 cm off and the shoulder went unnamed. A two-marker
+    blob of which neither end nor the centroid lies within ``support_px`` of where the
+    single-marker views put the point is two other markers: the point drops it (within 1 cm).
+    Without the check (its blobs kept) the point stays off."""
+    blobs = [  # per camera: u, v, capacity, radius (px), second moments (px^2)
+        [[71.16, 45.43, 1, 1.78, 1.035, -0.024, 1.070], [74.62, 80.42, 1, 1.69, 0.909, 0.045, 0.920],
+         [76.93, 70.52, 1, 1.60, 0.910, 0.027, 0.995], [78.06, 43.54, 1, 1.69, 1.067, -0.109, 1.045],
+         [82.89, 69.43, 1, 1.69, 0.920, 0.008, 0.954], [83.19, 41.94, 1, 1.87, 1.336, -0.124, 1.445],
+         [83.33, 81.31, 1, 1.60, 0.938, 0.027, 0.882], [83.79, 45.94, 1, 1.78, 1.290, 0.060, 1.223],
+         [148.16, 107.77, 1, 1.87, 1.197, 0.000, 1.208], [154.51, 52.15, 1, 1.38, 0.713, 0.036, 0.689]],
+        [[6.40, 95.79, 2, 2.26, 1.046, 0.020, 2.664], [74.08, 44.59, 2, 2.65, 1.340, -1.232, 4.871],
+         [78.65, 69.69, 1, 1.60, 0.905, 0.016, 0.867], [79.44, 81.41, 1, 1.60, 0.935, -0.096, 1.184],
+         [81.13, 78.33, 1, 1.49, 0.917, -0.248, 1.251], [84.13, 44.84, 1, 1.69, 0.931, 0.032, 0.893]],
+        [[3.26, 109.54, 1, 1.60, 0.894, 0.002, 0.873], [75.70, 81.05, 1, 1.69, 0.895, 0.002, 0.801],
+         [76.10, 40.94, 1, 1.69, 0.970, 0.104, 0.970], [76.20, 68.84, 1, 1.69, 0.939, -0.020, 0.896],
+         [81.08, 45.03, 1, 1.69, 1.104, 0.078, 1.131], [82.00, 69.27, 1, 1.60, 0.908, 0.009, 0.892],
+         [84.43, 81.79, 1, 1.60, 0.939, -0.011, 0.861], [87.43, 44.90, 1, 1.69, 0.939, 0.000, 0.906],
+         [148.90, 22.27, 1, 1.78, 1.076, 0.046, 1.098]],
+        [[4.50, 91.55, 1, 1.13, 0.556, 0.013, 0.584], [9.76, 18.98, 1, 1.49, 0.693, -0.041, 0.782],
+         [74.86, 45.46, 1, 1.60, 0.889, -0.001, 0.940], [77.57, 81.76, 1, 1.69, 0.909, -0.025, 0.809],
+         [81.37, 70.04, 1, 1.49, 0.855, 0.019, 0.794], [83.72, 44.92, 2, 2.88, 2.455, -1.356, 6.125]],
+    ]
+    right_shoulder = np.array([0.261, -0.131, 1.404])  # the take's truth
+    got = _points_from_blobs(blobs)
+    assert np.linalg.norm(got.X - right_shoulder, axis=1).min() < 0.01
+    original = PointReconstructor._choose_ends
+    monkeypatch.setattr(PointReconstructor, "_choose_ends", lambda *a: (original(*a)[0], []))
+    kept = _points_from_blobs(blobs)
+    assert np.linalg.norm(kept.X - right_shoulder, axis=1).min() > 0.05
+
 
 def _legs_pose(left_ankle: np.ndarray, right_ankle: np.ndarray, left_knee_lift: float = 0.0) -> np.ndarray:
     """Markers (8, 3) of the hip-width standard pose with the left knee raised forward by
