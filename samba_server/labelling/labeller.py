@@ -1515,7 +1515,8 @@ class Labeller:
         best = hyps[0]
         margin = best.score - hyps[1].score if len(hyps) > 1 else best.score
         labels = best.labels.copy()
-        prev, self._best_prev = self._best_prev, (t, self._named(pts, best.labels, best.facing))
+        best_named = self._named(pts, best.labels, best.facing)  # (8, 3)
+        prev, self._best_prev = self._best_prev, (t, best_named)
         if margin < cfg.min_margin:
             # name at once what every close runner-up agrees on (e.g. all but an ankle pair
             # whose order is unclear; with a shoulder on a point that may be a ghost, only if
@@ -1529,7 +1530,7 @@ class Labeller:
             if not partial:
                 if self._t_ambiguous is None:
                     self._t_ambiguous = t
-                steady = len(self.rig) >= 3 and t - self._steady_since(pts, best, t) >= cfg.steady_s - 1e-6
+                steady = len(self.rig) >= 3 and t - self._steady_since(best_named, t) >= cfg.steady_s - 1e-6
                 if t - self._t_ambiguous < cfg.max_wait and not steady:
                     return None
                 labels = best.labels.copy()
@@ -1591,14 +1592,14 @@ class Labeller:
         lift = float(foot[2]) - ANKLE_HEIGHT
         return replace(body, top=body.top + lift) if lift > 0 else body
 
-    def _steady_since(self, pts: Points3D, best, t: float) -> float:
-        """Since when (s) an unclear identification's best labelling has named the same markers
-        within ``gate_m`` of where it named them the frame before: a runner-up close in score (the
+    def _steady_since(self, X: np.ndarray, t: float) -> float:
+        """Since when (s) an unclear identification's best labelling, its markers X (8, 3) m
+        (NaN = unnamed), has named the same markers within ``gate_m`` of where it named them the
+        frame before: a runner-up close in score (the
         mirror image leaving a knee out, a subject back from a blackout) that never takes the
         lead is no reason to wait the whole ``max_wait``. Used with >= 3 cameras only: with two,
         every point is a 2-view point and a wrong labelling held as steady (a held-out
         backward-dribbling take went from 56 to 100 % of its confident frames > 20 cm off)."""
-        X = self._named(pts, best.labels, best.facing)
         since = t
         if self._steady is not None and self._steady[1] >= self._t_prev - 1e-6:
             t0, _t1, Y = self._steady
