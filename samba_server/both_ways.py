@@ -647,24 +647,26 @@ def _shin_lengths(markers: np.ndarray, both: np.ndarray) -> np.ndarray:
     return out
 
 
-def _whole_shins(take: np.ndarray, fwd: np.ndarray, bwd: np.ndarray, doubted: np.ndarray,
+def _whole_shins(take: np.ndarray, fwd: np.ndarray, bwd: np.ndarray, elsewhere: np.ndarray,
                  shin: np.ndarray) -> np.ndarray:
     """take (8,) bool (the names one frame takes from the backward pass) grown by the other
-    marker of each leg of which only the knee or the ankle is taken, where the forward pass
-    doubts its own name for it and the backward pass names it elsewhere (doubted (8,) bool),
-    even a name the backward pass doubts too, when the leg named from the backward pass alone
-    keeps the subject's shin length (shin (2,) m, :func:`_shin_lengths`) within ``SHIN_TOL_M``
-    and the mixed leg is off it by more than ``SHIN_OFF_M``: the knee of one pass and the
-    ankle of the other are no leg (a dancer's legs swapped in the forward pass; the backward
-    pass, right, doubted its ankles from a rename of its own that the forward pass's wrong
-    names confirmed; the mix took the backward knees and kept the forward ankles for 1 s).
-    fwd, bwd: (8, 3) the frame's names of each pass."""
+    marker of each leg of which only the knee or the ankle is taken, where the backward pass
+    names it elsewhere (elsewhere (8,) bool), even a name either pass doubts or neither, when
+    the leg named from the backward pass alone keeps the subject's shin length (shin (2,) m,
+    :func:`_shin_lengths`) within ``SHIN_TOL_M`` and the mixed leg is off it by more than
+    ``SHIN_OFF_M``: the knee of one pass and the ankle of the other are no leg. A dancer's
+    legs swapped in the forward pass: the backward pass, right, doubted its ankles from a
+    rename of its own that the forward pass's wrong names confirmed, and the mix took the
+    backward knees and kept the forward ankles for 1 s; or the forward knees came right by
+    tracking 0.5 s before a rule renamed its ankles, and the mix took the backward ankles and
+    kept the forward knees, never doubted, for 1.2 s. fwd, bwd: (8, 3) the frame's names of
+    each pass."""
     out = take.copy()
     for i, (_s, _w, kn, an) in enumerate(SIDES):
         if not np.isfinite(shin[i]) or take[kn] == take[an]:
             continue
         other = an if take[kn] else kn
-        if not doubted[other]:
+        if not elsewhere[other]:
             continue
         d_b = float(np.linalg.norm(bwd[kn] - bwd[an]))
         mix_k, mix_a = (bwd[kn], fwd[an]) if take[kn] else (fwd[kn], bwd[an])
@@ -771,7 +773,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
             take |= ~nf[k] & sure_b  # a naming found wrong in part: its gaps are filled in too
         take |= (bridged[k] | refuted[k]) & sure_b
         if take.any():
-            take = _whole_shins(take, fwd.markers[k], bwd.markers[k], doubted_f[k] & nb[k] & ~same[k], shin)
+            take = _whole_shins(take, fwd.markers[k], bwd.markers[k], nb[k] & ~same[k], shin)
         if not take.any():
             continue
         mixed = markers[k].copy()
