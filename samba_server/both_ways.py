@@ -167,8 +167,6 @@ log = logging.getLogger(__name__)
 
 #: bit sets of the two halves of the body a rename confirmed as a whole speaks for
 _UPPER = (1 << LS) | (1 << RS) | (1 << LW) | (1 << RW)
-#: pairs of markers that meet and part (:func:`_parted`): the hands, a hand and a shoulder
-_MEETING = ((LW, RW), (LS, LW), (RS, RW), (LS, RW), (RS, LW))
 _LEGS = (1 << LK) | (1 << RK) | (1 << LA) | (1 << RA)
 
 __all__ = ["PassResult", "backward_pass", "choose", "disputed_m", "end_facing", "legs_unsure_of", "loose_of",
@@ -218,13 +216,12 @@ FIT_RATIO = 2.0
 FIT_GAIN_M2 = 0.003
 #: m: a pass names a leg marker as chosen when its marker is this near the chosen one
 ALIKE_M = 0.03
-#: m: two markers (the wrists; a wrist and a shoulder) either pass names this near each other
-#: are together ...
+#: m: hands whose wrists either pass names this near each other are together ...
 TOGETHER_M = 0.10
 #: ... and this far apart, apart (between the two: neither)
 APART_M = 0.15
-#: s: two markers the two passes name the other way round take the backward names where they
-#: were together at most this long before and not apart ... after
+#: s: the wrists the two passes name the other way round take the backward names where the
+#: hands were together at most this long before and not apart ... after
 PARTED_S = 0.5
 #: m: a leg named by one pass keeps the subject's shin length within this ...
 SHIN_TOL_M = 0.03
@@ -698,39 +695,36 @@ def _doubles(markers: np.ndarray) -> int:
 
 
 def _parted(markers: np.ndarray, fwd: PassResult, bwd: PassResult, t: np.ndarray) -> np.ndarray:
-    """(F, 8) bool: the chosen names markers (F, 8, 3) that take the backward ones where a hand
-    parted from the other hand or from a shoulder: in each run where the chosen names of such a
-    pair (the wrists; a wrist and a shoulder) are the backward pass's names of the pair the
-    other way round, when the two were together (named within ``TOGETHER_M`` of each other by
-    either pass) within ``PARTED_S`` s before the run and are not so again within ``PARTED_S``
-    s after it, where they are more than ``APART_M`` apart. Which of two markers together is
-    which as they part no view tells (:meth:`Labeller.unseparated`), so each pass is right going
-    into a meeting and guesses coming out of it: after one, in time, the forward pass guessed
-    and the backward pass, which has not yet been through it, tracked. A dance's hands met at
-    frame 433 and the forward pass named them the other way round for 0.3 s as they parted,
-    16-27 cm off, the backward pass right (005_06 seed 601, 96.5 -> 98.9 % of frames all
-    right); a swordplay's right hand left its shoulder with the two names swapped (002_10
-    seed 601). Markers nearly together after the run (within ``APART_M``) may be the backward
-    pass's own way out of a meeting: no verdict. t: (F,) s."""
-    out = np.zeros(markers.shape[:2], bool)
-    for m, n in _MEETING:
-        pair = [m, n]
-        both = np.isfinite(markers[:, pair]).all(axis=(1, 2)) & np.isfinite(bwd.markers[:, pair]).all(axis=(1, 2))
-        swapped = both & (np.linalg.norm(markers[:, m] - bwd.markers[:, n], axis=1) < 0.01) \
-            & (np.linalg.norm(markers[:, n] - bwd.markers[:, m], axis=1) < 0.01)
-        if not swapped.any():
-            continue
+    """(F,) bool: the frames of each run where the chosen wrists markers (F, 8, 3) are the
+    backward pass's wrists the other way round, that take the backward names: the hands were
+    together (wrists named within ``TOGETHER_M`` of each other by either pass) within
+    ``PARTED_S`` s before the run and are not so again within ``PARTED_S`` s after it, where
+    they are more than ``APART_M`` apart. Which hand is which as hands part no view tells
+    (:meth:`Labeller.unseparated`), so each pass is right going into a meeting of the hands
+    and guesses coming out of it: after one, in time, the forward pass guessed and the backward
+    pass, which has not yet been through it, tracked. A dance's hands met at frame 433 and the
+    forward pass named them the other way round for 0.3 s as they parted, 16-27 cm off, the
+    backward pass right (005_06 seed 601, 96.5 -> 98.9 % of frames all right). Hands nearly
+    together after the run (within ``APART_M``) may be the backward pass's own way out of a
+    meeting: no verdict. t: (F,) s."""
+    F = len(markers)
+    out = np.zeros(F, bool)
+    wr = [LW, RW]
+    both = np.isfinite(markers[:, wr]).all(axis=(1, 2)) & np.isfinite(bwd.markers[:, wr]).all(axis=(1, 2))
+    swapped = both & (np.linalg.norm(markers[:, LW] - bwd.markers[:, RW], axis=1) < 0.01) \
+        & (np.linalg.norm(markers[:, RW] - bwd.markers[:, LW], axis=1) < 0.01)
+    if not swapped.any():
+        return out
 
-        def apart(x: np.ndarray) -> np.ndarray:
-            named = np.isfinite(x[:, pair]).all(axis=(1, 2))
-            return np.where(named, np.linalg.norm(x[:, m] - x[:, n], axis=1), np.inf)
+    def apart(x: np.ndarray) -> np.ndarray:
+        named = np.isfinite(x[:, wr]).all(axis=(1, 2))
+        return np.where(named, np.linalg.norm(x[:, LW] - x[:, RW], axis=1), np.inf)
 
-        sep = np.minimum(apart(fwd.markers), apart(bwd.markers))  # (F,) m, inf where neither names both
-        for a, b in _runs(swapped):
-            before = sep[np.searchsorted(t, t[a] - PARTED_S):a + 1].min()
-            after = sep[b - 1:np.searchsorted(t, t[b - 1] + PARTED_S, side="right")].min()
-            if before < TOGETHER_M and after > APART_M:
-                out[a:b, pair] = True
+    sep = np.minimum(apart(fwd.markers), apart(bwd.markers))  # (F,) m, inf where neither names both
+    for a, b in _runs(swapped):
+        before = sep[np.searchsorted(t, t[a] - PARTED_S):a + 1].min()
+        after = sep[b - 1:np.searchsorted(t, t[b - 1] + PARTED_S, side="right")].min()
+        out[a:b] = before < TOGETHER_M and after > APART_M
     return out
 
 
@@ -763,9 +757,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     it follows the marker's course better (:func:`_on_course`), and a run where the two name
     markers at points apart takes the backward names where they fit the solver clearly better
     (:func:`_fits_better`; not with ``fit`` False, as with two cameras), and the backward
-    names of two markers where the chosen ones are those the other way round right after a
-    hand met the other hand or a shoulder (:func:`_parted`; not with ``picked_up`` False).
-    Returns ((F, 8, 3)
+    wrists where the chosen ones are those the other way round right after the hands met
+    (:func:`_parted`; not with ``picked_up`` False). Returns ((F, 8, 3)
     markers, (F,) bool: a name taken from the backward pass)."""
     nf = np.isfinite(fwd.markers).all(axis=2)
     nb = np.isfinite(bwd.markers).all(axis=2)
@@ -845,9 +838,9 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     markers, course = _on_course(markers, bwd.markers, t)
     better = _fits_better(fwd, bwd, nf, nb, both) if fit else np.zeros(len(t), bool)
     markers[better] = bwd.markers[better]
-    parted = _parted(markers, fwd, bwd, t) if picked_up else np.zeros(nf.shape, bool)
-    markers[parted] = bwd.markers[parted]
-    return markers, from_b | course | better | parted.any(axis=1)
+    parted = _parted(markers, fwd, bwd, t) if picked_up else np.zeros(len(t), bool)
+    markers[np.ix_(parted, [LW, RW])] = bwd.markers[np.ix_(parted, [LW, RW])]
+    return markers, from_b | course | better | parted
 
 
 def loose_of(markers: np.ndarray, fwd: PassResult, bwd: PassResult) -> np.ndarray | None:
