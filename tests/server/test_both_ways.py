@@ -486,7 +486,7 @@ def test_a_swap_of_both_legs_mended_in_two_steps_is_doubted_back_to_where_it_beg
     ankles. Knees that had agreed for longer than JOIN_S before the rename are doubted only
     in the second before it, as any marker of a rename's half of the body (here the backward
     knees are 6 cm off the shin before that second, so the legs are not taken whole either:
-    see the next test)."""
+    see the two tests of whole legs below)."""
     F = 300
     t = np.arange(F) / FPS
     b = np.zeros((F, 8, 3))
@@ -566,6 +566,7 @@ def test_knees_a_pass_does_not_doubt_come_with_the_ankles_taken_from_the_other_w
     markers, _from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
     assert np.allclose(markers, b)
 
+
 @pytest.mark.parametrize("case", ["parted", "they meet again", "two cameras"])
 def test_wrists_the_forward_pass_swapped_as_the_hands_parted_take_the_backward_names(case):
     """Hands together 5 cm apart in frames 100-110 (a clap, a hilt), parting to 30 cm by frame
@@ -594,6 +595,7 @@ def test_wrists_the_forward_pass_swapped_as_the_hands_parted_take_the_backward_n
         assert np.allclose(markers, b) and np.array_equal(np.flatnonzero(from_b), np.arange(111, 150))
     else:
         assert np.allclose(markers, a) and not from_b.any()
+
 
 def test_where_both_passes_doubt_a_name_the_fit_splits_the_stretch_between_their_renames():
     """Two hands pass each other at frame 135 and each pass's tracking swaps them there: the
