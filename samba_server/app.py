@@ -119,12 +119,26 @@ def make_reconstructor(db_path: str | None, config: ReconstructConfig | None = N
     return rec
 
 
+def warn_few_cameras(rig: CameraRig) -> bool:
+    """Log a warning when the rig has fewer than 3 cameras, saying what its marker names are
+    worth there; True when it did."""
+    if len(rig) >= 3:
+        return False
+    log.warning("%d camera(s) in the calibration: with fewer than 3, every pair of blobs on an epipolar line "
+                "makes a 3D point and most fit some body, so marker names are often wrong (about 1 frame in 5 on "
+                "the labelling benchmark with 2 cameras, docs/BENCHMARKS.md) and joint_bound flags only part of "
+                "it (a confidently wrong joint in 3-12 %% of confident frames there); use 3 or more cameras",
+                len(rig))
+    return True
+
+
 def build_server(calibration: str | os.PathLike, configs: ServerConfigs, db: str | None = None,
                  record: str | None = None, live: bool = True, subject: str | None = None) -> Server:
     """Load the calibration and build a Server (raises CalibrationError / RecorderError, and
     SubjectError for a bad ``subject`` toml)."""
     toml = Path(calibration).read_bytes()
     rig = CameraRig.load(calibration)
+    warn_few_cameras(rig)
     server_cfg = configs.server
     if not live and server_cfg.max_lag_ms:
         server_cfg = ServerConfig(**{**server_cfg.__dict__, "max_lag_ms": 0.0})

@@ -13,7 +13,8 @@ from samba_common.calib import CalibrationError, CameraRig
 from samba_common.config import ConfigError
 from samba_common.progress import Progress
 from samba_server.activity import MoteActivity
-from samba_server.app import add_network_args, export_joints, load_server_configs, make_reconstructor, setup_logging
+from samba_server.app import (add_network_args, export_joints, load_server_configs, make_reconstructor, setup_logging,
+                               warn_few_cameras)
 from samba_server.record import TakeReader, take_placement
 from samba_server.replay import Player, replay_into, take_calibration, take_subject
 from samba_server.server import Server, ServerConfig
@@ -54,6 +55,7 @@ def main(argv: list[str] | None = None) -> int:
                 print("samba-replay: the take has no calibration; pass --calibration", file=sys.stderr)
                 return 1
             rig = CameraRig.loads(toml, path=args.calibration or f"{args.take} (its recorded calibration)")
+            warn_few_cameras(rig)
             cfg = load_server_configs(args.config, take_placement(args.take))  # placed as live
             subject = take_subject(args.take)  # recorded with --subject: solve with it again
             server = Server(rig, toml, make_reconstructor(args.db, cfg.reconstruct, subject),

@@ -50,10 +50,14 @@ def test_inspect_reports_and_exports(take, tmp_path, capsys):
     assert inspect_cli.main([str(tmp_path / "missing.mcap")]) == 1
 
 
-def test_replay_out_runs_the_server_pipeline(take, tmp_path):
+def test_replay_out_runs_the_server_pipeline(take, tmp_path, caplog):
     path, joints = take
     out = tmp_path / "replayed.npz"
-    assert replay.main([str(path), "--out", str(out)]) == 0
+    with caplog.at_level("WARNING", logger="samba_server.app"):
+        assert replay.main([str(path), "--out", str(out)]) == 0
+    # two cameras: the user is told what their names are worth
+    assert any("2 camera(s) in the calibration" in r.getMessage() and "use 3 or more" in r.getMessage()
+               for r in caplog.records)
     got = load_joints(out)
     assert len(got.t) == len(joints)  # one frame per capture, the garbage packet dropped
     markers = got.extra["markers"]
@@ -93,3 +97,11 @@ def test_viewer_record_buttons_start_and_stop_a_readable_recording(tmp_path):
     assert len(takes) == 1
     assert any(m.topic == "/calibration" or "calib" in m.topic for m in TakeReader(takes[0]))
     toggle(False)                     # stopping when nothing records is harmless
+
+
+def test_only_a_rig_of_fewer_than_three_cameras_is_warned_about(caplog):
+    from samba_server.app import warn_few_cameras
+
+    with caplog.at_level("WARNING", logger="samba_server.app"):
+        assert not warn_few_cameras(default_rig(4)) and not caplog.records
+        assert warn_few_cameras(default_rig(2)) and "use 3 or more cameras" in caplog.records[0].getMessage()
