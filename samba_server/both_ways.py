@@ -707,12 +707,9 @@ def _parted(markers: np.ndarray, fwd: PassResult, bwd: PassResult, t: np.ndarray
     backward pass right (005_06 seed 601, 96.5 -> 98.9 % of frames all right). Hands nearly
     together after the run (within ``APART_M``) may be the backward pass's own way out of a
     meeting: no verdict. t: (F,) s."""
-    F = len(markers)
-    out = np.zeros(F, bool)
+    out = np.zeros(len(markers), bool)
     wr = [LW, RW]
-    both = np.isfinite(markers[:, wr]).all(axis=(1, 2)) & np.isfinite(bwd.markers[:, wr]).all(axis=(1, 2))
-    swapped = both & (np.linalg.norm(markers[:, LW] - bwd.markers[:, RW], axis=1) < 0.01) \
-        & (np.linalg.norm(markers[:, RW] - bwd.markers[:, LW], axis=1) < 0.01)
+    swapped = _within(markers[:, wr], bwd.markers[:, [RW, LW]]).all(axis=1)
     if not swapped.any():
         return out
 

@@ -510,6 +510,18 @@ def test_a_swap_of_both_legs_mended_in_two_steps_is_doubted_back_to_where_it_beg
     assert np.allclose(markers[100:140, [LK, RK]], early[100:140, [LK, RK]])
 
 
+
+def _dancer_legs(F: int) -> tuple[np.ndarray, np.ndarray]:
+    """t (F,) s and the true markers (F, 8, 3) of a standing subject: the upper body's markers
+    1 m apart on a line, the legs side by side (shins 45 cm; a knee of one leg and the ankle of
+    the other 53-54 cm apart)."""
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)
+    legs = np.array([[-0.1, 0.0, 0.5], [0.1, 0.1, 0.5], [-0.1, -0.15, 0.08], [0.1, 0.3, 0.1]])  # LK RK LA RA
+    b[:, [LK, RK, LA, RA]] = legs + [5.0, 0.0, 0.0]
+    return t, b
+
 def test_a_leg_is_taken_whole_from_one_pass_where_a_knee_of_one_and_an_ankle_of_the_other_break_the_shin():
     """A dancer's legs: the forward pass renames the ankles the wrong way round at frame 99,
     tracks the knees onto the wrong legs from 110 and renames all four right at 200. The
@@ -520,11 +532,7 @@ def test_a_leg_is_taken_whole_from_one_pass_where_a_knee_of_one_and_an_ankle_of_
     backward ankles come with the backward knees. Backward ankles that break the shin
     themselves do not."""
     F = 300
-    t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # the upper body's markers 1 m apart
-    legs = np.array([[-0.1, 0.0, 0.5], [0.1, 0.1, 0.5], [-0.1, -0.15, 0.08], [0.1, 0.3, 0.1]])  # LK RK LA RA
-    b[:, [LK, RK, LA, RA]] = legs + [5.0, 0.0, 0.0]
+    t, b = _dancer_legs(F)
     a = b.copy()
     a[99:200, [LA, RA]] = b[99:200, [RA, LA]]
     a[110:200, [LK, RK]] = b[110:200, [RK, LK]]
@@ -552,11 +560,7 @@ def test_knees_a_pass_does_not_doubt_come_with_the_ankles_taken_from_the_other_w
     the subject's shin, for 1.2 s (005_09 seed 601 after a change of the points lost 36 % of
     its frames so). A leg whose backward knee and ankle keep the shin is taken whole."""
     F = 300
-    t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # the upper body's markers 1 m apart
-    legs = np.array([[-0.1, 0.0, 0.5], [0.1, 0.1, 0.5], [-0.1, -0.15, 0.08], [0.1, 0.3, 0.1]])  # LK RK LA RA
-    b[:, [LK, RK, LA, RA]] = legs + [5.0, 0.0, 0.0]
+    t, b = _dancer_legs(F)
     a = b.copy()
     a[100:200, [LK, RK, LA, RA]] = b[100:200, [RK, LK, RA, LA]]
     a[170:200, [LK, RK]] = b[170:200, [LK, RK]]
