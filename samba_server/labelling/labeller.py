@@ -87,6 +87,7 @@ class LabelConfig:
     wrist_side_w: float = 0.5  #: m of cost per m a wrist not named last frame is nearer the other shoulder than its own
     glued_wrist_s: float = 0.3  #: a wrist held a shoulder width from the other shoulder this long, its own shoulder unnamed, is that shoulder
     anchor_m: float = 0.05  #: cost of a point placed by the rigid lengths rather than the prediction
+    shins_margin_m: float = 0.04  #: both ankles (or knees) unnamed, the other two named: named on the two free points that fit the shins this much better (m, both summed) than any other pairing (inf: never)
     wrist_clear_m: float = 0.15  #: a lost wrist found within its arm's reach must be this far from every named marker
     apart_views: int = 2  #: both wrists named, neither seen apart from the other in this many views (hands together): the poses carry them unnamed, a gap rather than a coin flip, still solved from them (0: never; :meth:`Labeller.unseparated`)
     max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast ...
@@ -861,10 +862,12 @@ class Labeller:
         a shin below its knee. The candidates are assigned optimally; a pair is kept when the
         best assignment without it costs ``recover_margin_m`` more and the marker's rigid
         distances hold. A leg with neither marker named is first looked for as a
-        pair (:meth:`_recover_leg`). assign, arow (8,) in place."""
+        pair (:meth:`_recover_leg`), both ankles (or both knees) by the shins alone
+        (:meth:`_recover_ends`). assign, arow (8,) in place."""
         cfg = self.config
         body = self._body
         self._recover_leg(pts, assign, arow, row_pt)
+        self._recover_ends(pts, assign, arow, row_pt)
         named = np.full((N_MARKERS, 3), np.nan)
         named[assign >= 0] = pts.X[assign[assign >= 0]]
         lost = np.flatnonzero(assign < 0)
@@ -991,6 +994,56 @@ class Labeller:
             if len(fits) == 1:
                 log.debug("t=%.3f s: leg %d-%d found again as the one pair of points that fits it", self._t_frame, k, a)
                 _name_points(assign, arow, row_pt, (k, a), fits[0])
+
+    def _recover_ends(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray) -> None:
+        """Both ankles unnamed, both knees named (or the other way round): the feet close
+        together fit both shins either way round, so the recovery's margin, made for the
+        distance from a prediction, names neither (a walk whose ankles' tracks swapped as the
+        feet passed left them unnamed for 15 frames, the free points fitting the shins within
+        1 cm one way and 9 cm the other). Here the two free points (sure, or 2-view with one
+        view missing them at ``unexplained_m`` more) are named when that pairing fits the shins,
+        the lower marker below, the left one not right of the right one by ``crossed_m``, and
+        every other pairing of free points costs ``shins_margin_m`` more. With two cameras
+        ghosts fit shins as easily: three needed. assign, arow (8,) in place."""
+        cfg = self.config
+        if self._facing is None or len(self.rig) < 3 or cfg.shins_margin_m == float("inf"):
+            return
+        for ends, anchors, below in (((LA, RA), (LK, RK), True), ((LK, RK), (LA, RA), False)):
+            if (assign[list(ends)] >= 0).any() or (assign[list(anchors)] < 0).any():
+                continue
+            free = _unnamed(len(pts), assign)
+            free = free[(pts.n_views[free] >= 3) | (pts.unexplained[free] <= 1)]
+            if len(free) < 2:
+                return
+            X = pts.X[free]
+            A = pts.X[assign[list(anchors)]]  # (2, 3) left, right
+            e = np.abs(np.linalg.norm(X[:, None] - A[None], axis=2) - self._body.shin)  # (P, 2)
+            lower = (X[:, None, 2] < A[None, :, 2]) if below else (X[:, None, 2] > A[None, :, 2])
+            doubt = np.where(pts.n_views[free] < 3, cfg.unexplained_m * pts.unexplained[free], 0.0)
+            cost = np.where((e <= self._body.tol) & lower, e + doubt[:, None], np.inf)
+            right = right_of(self._facing)
+            trials = []
+            for i in range(len(free)):
+                for j in range(len(free)):
+                    c = cost[i, 0] + cost[j, 1]
+                    if i == j or not np.isfinite(c):
+                        continue
+                    trials.append((c, i, j))
+            trials.sort()
+            if not trials:
+                continue
+            c, i, j = trials[0]
+            if len(trials) > 1 and trials[1][0] - c < cfg.shins_margin_m:
+                continue
+            if float((X[j] - X[i]) @ right) < -cfg.crossed_m:
+                continue
+            named = np.full((N_MARKERS, 3), np.nan)
+            named[assign >= 0] = pts.X[assign[assign >= 0]]
+            named[list(ends)] = X[[i, j]]
+            if self._body.violations(named):
+                continue
+            log.debug("t=%.3f s: markers %s found again on the points that fit the shins", self._t_frame, ends)
+            _name_points(assign, arow, row_pt, ends, (int(free[i]), int(free[j])))
 
     def _recover_legs(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray,
                       right: np.ndarray) -> None:
