@@ -126,8 +126,9 @@ def warn_few_cameras(rig: CameraRig) -> bool:
         return False
     log.warning("%d camera(s) in the calibration: with fewer than 3, every pair of blobs on an epipolar line "
                 "makes a 3D point and most fit some body, so marker names are often wrong (about 1 frame in 5 on "
-                "the labelling benchmark with 2 cameras, docs/BENCHMARKS.md) and joint_bound flags only part of "
-                "it (a confidently wrong joint in 3-12 %% of confident frames there); use 3 or more cameras",
+                "the labelling benchmark with 2 cameras, docs/BENCHMARKS.md): every left/right joint's bound "
+                "covers the other side (joint_bound, most joints flagged as guesses) and a confidently wrong "
+                "joint is still left in about 1 %% of confident frames there; use 3 or more cameras",
                 len(rig))
     return True
 

@@ -159,7 +159,7 @@ from samba_common.skeleton import N_MARKERS
 from .labelling import bit_markers, marker_bits
 from .labelling.labeller import facing_of
 from .labelling.rigid import LA, LK, LS, LW, RA, RK, RS, RW, SIDES
-from .recon.bounds import mirrored_legs, mirrored_wrists, widened
+from .recon.bounds import mirrored_legs, mirrored_pairs, mirrored_wrists, widened
 from .recon.reconstruct import solve_both_ways
 from .server import Server, ServerConfig
 
@@ -907,6 +907,8 @@ def relabel_both_ways(server: Server, packets: list[list], t: np.ndarray, fwd: P
              "legs_unsure": legs_unsure_of(markers, fwd, bwd), "wrists_unseparated": gap[:, LW]}
     extra["joint_bound"] = mirrored_wrists(mirrored_legs(widened(bounds, disputed_m(fwd, bwd)), joints,
                                                          extra["legs_unsure"]), joints, gap[:, LW])
+    if len(server.rig) < 3:  # left and right are a guess there
+        extra["joint_bound"] = mirrored_pairs(extra["joint_bound"], joints)
     return joints, extra
 
 

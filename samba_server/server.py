@@ -30,7 +30,7 @@ from samba_common.wire import PacketError, decode_packet
 
 from .record import Recorder
 from .labelling import LabelConfig, Labeller, LabelQuality, marker_bits
-from .recon.bounds import mirrored_legs, mirrored_wrists
+from .recon.bounds import mirrored_legs, mirrored_pairs, mirrored_wrists
 from .sync import FrameSync, SyncConfig, SyncPacket
 from .triangulate import TriangulateConfig, Triangulator
 
@@ -306,7 +306,8 @@ class Server:
         cannot fit go back to the labelling (:meth:`Labeller.refit`), which may swap them: the
         frame is then solved again with the new names, which are returned. Legs the labelling
         is unsure of (:attr:`Labeller.legs_unsure`: they may be each other's) widen the
-        knees' and ankles' bounds (:func:`~samba_server.recon.bounds.mirrored_legs`). A solved pose feeds
+        knees' and ankles' bounds (:func:`~samba_server.recon.bounds.mirrored_legs`); with fewer than 3
+        cameras every left/right pair's are (:func:`~samba_server.recon.bounds.mirrored_pairs`). A solved pose feeds
         the labelling's predictions; a solver error is logged and leaves the frame unsolved."""
         joints, residual = np.full((N_JOINTS, 3), np.nan), float("nan")
         bounds = np.full(N_JOINTS, np.inf)
@@ -324,6 +325,8 @@ class Server:
             joints = np.asarray(r.joints, float)
             residual = float(r.residual)
             bounds = mirrored_legs(r.bounds, joints, self.labeller.legs_unsure)
+            if len(self.rig) < 3:  # left and right are a guess there
+                bounds = mirrored_pairs(bounds, joints)
         except Exception:
             log.exception("solver failed on frame t=%.3f s (frame left unsolved)", t)
         if np.isfinite(joints).all():

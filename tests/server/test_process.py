@@ -122,6 +122,35 @@ def test_a_labelling_error_costs_its_frame_not_the_take(tmp_path, capsys, monkey
     assert np.isfinite(got.joints[int(1.6 * FPS):]).all(axis=(1, 2)).mean() > 0.95
 
 
+@pytest.mark.parametrize("one_pass", [False, True])
+def test_two_cameras_flag_every_left_right_joint_as_a_guess(tmp_path, caplog, one_pass):
+    """With two cameras a naming and its mirror image fit bodies alike: samba-process (both
+    passes, and the live one) gives every shoulder, elbow, wrist, knee and ankle a bound at
+    least its distance from the other side's, so a left joint drawn where the right one is
+    is not a confident joint. The warning says that 3 cameras are needed."""
+    from samba_common.skeleton import JOINT_NAMES
+
+    joints, t = short_take(seconds=1.0, fps=FPS)
+    rig = default_rig(2)
+    calib = tmp_path / "calibration.toml"
+    rig.save(calib)
+    videos = _write_videos(tmp_path, rig, joints, t)
+    out = tmp_path / "joints.npz"
+    with caplog.at_level("WARNING", logger="samba_server.app"):
+        assert main([str(calib), *map(str, videos), "--out", str(out), "--fps", "30"]
+                    + (["--one-pass"] if one_pass else [])) in (0, 1)
+    assert any("use 3 or more cameras" in r.getMessage() for r in caplog.records)
+    z = np.load(out)
+    got, bound = z["joints"], z["joint_bound"]
+    solved = np.isfinite(got).all(axis=(1, 2))
+    assert solved.mean() > 0.5
+    for side in ("shoulder", "elbow", "wrist", "knee", "ankle"):
+        left, right = JOINT_NAMES.index(f"left_{side}"), JOINT_NAMES.index(f"right_{side}")
+        apart = np.linalg.norm(got[solved, left] - got[solved, right], axis=1)
+        assert (bound[solved, left] >= apart - 1e-9).all() and (bound[solved, right] >= apart - 1e-9).all()
+    assert (bound[solved, JOINT_NAMES.index("left_shoulder")] >= 0.2).mean() > 0.9  # shoulders 0.3-0.4 m apart
+
+
 def test_process_bad_inputs(tmp_path, capsys):
     rig = default_rig(2)
     calib = tmp_path / "calibration.toml"
