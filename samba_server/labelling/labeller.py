@@ -76,6 +76,7 @@ class LabelConfig:
     split_legs_sigma_px: float = 0.5  #: the same for the two knees or the two ankles (inf: off; on by default: the hip width the subject is measured with comes from them) ...
     split_wrists_sigma_px: float = 0.5  #: the same for the two wrists (hands together), the sign from their tracks' separation (inf: off)
     split_legs_max_deg: float = 35.0  #: ... used only this close in direction to the guess (the subject's right): further off, the guess cannot tell which end is which
+    split_share_s: float = 0.1  #: a knee and the other leg's ankle on one point are placed either side of it along their predictions for this long, then both on it (inf: always split)
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
     rescue_m: float = 0.06  #: a tracked shoulder or wrist with no point is triangulated from two views' blobs within this of its prediction (0: never) ...
@@ -224,6 +225,8 @@ class Labeller:
         self._best_prev: tuple[float, np.ndarray] | None = None
         self._shared = np.zeros(N_MARKERS, bool)
         self._together: dict[tuple[int, int], float] = {}  # (m, n) markers -> when they last shared a point
+        self._sharing: dict[tuple[int, int], float] = {}  # a knee and the other ankle -> since when they share a point
+        self._sharing_t = -np.inf  # the frame _sharing was last updated in
         self._views: list = []  # this frame's blobs per camera (ViewBlobs)
         self._pts: Points3D | None = None  # this frame's 3D points
         self._knees_crossed_since: float | None = None
@@ -621,6 +624,10 @@ class Labeller:
                         self._renamed |= (1 << lm) | (1 << rm)
                         assign[[lm, rm]], arow[[lm, rm]], out[[lm, rm]] = assign[[rm, lm]], arow[[rm, lm]], out[[rm, lm]]
             self._uncross_knees(out, assign, arow, right, t)
+        continued = self._sharing_t == self._t_prev
+        self._sharing = {(m, n): self._sharing.get((m, n), t) if continued else t for m, n in _KNEE_OTHER_ANKLE
+                         if assign[m] >= 0 and assign[m] == assign[n]}
+        self._sharing_t = t
         self._split_shared(out, assign, pts, pred, right)
         self._shared = np.array([np.count_nonzero(assign == a) > 1 if a >= 0 else False for a in assign])
         for m, n in _KNEE_OTHER_ANKLE:
@@ -1457,7 +1464,10 @@ class Labeller:
         separation and motion (one above the other on a sword hilt, crossing over each other in a
         dance), and along the subject's right only when those coincide; the moments then measure
         the separation, that guess giving its sign, so a turning hilt is followed frame by frame:
-        the names the hands part with come from this split.
+        the names the hands part with come from this split. A knee and the other leg's ankle (a
+        foot kicked back behind the other knee) are split along their predictions only for
+        ``split_share_s`` after they met on the point, then both stay on it: their tracks, split
+        from it frame after frame, keep the direction they met in while the legs turn.
         With two cameras the wrists' tracks are too often on ghosts: :meth:`_wrists_split`
         chooses. out (8, 3) in place; assign (8,) point per marker (-1: none); pred (8, 3) the
         markers' predictions; right (3,) the subject's right or None."""
@@ -1479,6 +1489,8 @@ class Labeller:
                 off = lateral if off is None else self._wrists_split(out, pred, lateral, off)
             if off is None:  # no way to tell which end is which: both stay on the point
                 continue
+            if self._t_frame - self._sharing.get((m, n), self._t_frame) > cfg.split_share_s:
+                continue  # their predictions, split from this point for a while, say no more where they are
             legs = (m, n) in _LEG_PAIRS
             measured = self._measured_split(pts, int(p), 2.0 * off, named,
                                             cfg.split_legs_sigma_px if legs else
