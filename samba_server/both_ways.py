@@ -725,6 +725,25 @@ def _parted(markers: np.ndarray, fwd: PassResult, bwd: PassResult, t: np.ndarray
     return out
 
 
+def _unsure_mirrored(markers: np.ndarray, fwd: PassResult, bwd: PassResult) -> np.ndarray:
+    """(F,) bool: the frames where the chosen legs markers (F, 8, 3) are the backward pass's
+    the other way round (both knees, and each ankle both passes name), the forward pass unsure
+    of their side (``PassResult.legs_unsure``: named afresh, the knees not yet seen apart the
+    way the names say) and the backward pass sure (it tracked them from knees seen so): those
+    take the backward legs. A dancer back from a blackout in a split leap, the forward
+    identification named the legs the mirror way round, flagged them unsure, and kept them so
+    for 0.8 s, up to 2 m off; the backward pass had tracked them right through (005_17 seed
+    605, 91.4 -> 98.3 % of frames all right). Either pass without the flag: no frame."""
+    out = np.zeros(len(markers), bool)
+    if fwd.legs_unsure is None or bwd.legs_unsure is None:
+        return out
+    knees = _within(markers[:, [LK, RK]], bwd.markers[:, [RK, LK]]).all(axis=1)
+    ankles = _within(markers[:, [LA, RA]], bwd.markers[:, [RA, LA]])
+    both = np.isfinite(markers[:, [LA, RA]]).all(axis=2) & np.isfinite(bwd.markers[:, [RA, LA]]).all(axis=2)
+    mirrored = knees & (ankles | ~both).all(axis=1)
+    return mirrored & fwd.legs_unsure[:len(markers)].astype(bool) & ~bwd.legs_unsure[:len(markers)].astype(bool)
+
+
 def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.0,
            picked_up: bool = True, fit: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Per frame and marker the forward name, or the backward one where the forward pass
@@ -837,7 +856,9 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     markers[better] = bwd.markers[better]
     parted = _parted(markers, fwd, bwd, t) if picked_up else np.zeros(len(t), bool)
     markers[np.ix_(parted, [LW, RW])] = bwd.markers[np.ix_(parted, [LW, RW])]
-    return markers, from_b | course | better | parted
+    legs = _unsure_mirrored(markers, fwd, bwd) if picked_up else np.zeros(len(t), bool)
+    markers[np.ix_(legs, [LK, RK, LA, RA])] = bwd.markers[np.ix_(legs, [LK, RK, LA, RA])]
+    return markers, from_b | course | better | parted | legs
 
 
 def loose_of(markers: np.ndarray, fwd: PassResult, bwd: PassResult) -> np.ndarray | None:

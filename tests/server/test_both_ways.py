@@ -601,6 +601,34 @@ def test_wrists_the_forward_pass_swapped_as_the_hands_parted_take_the_backward_n
         assert np.allclose(markers, a) and not from_b.any()
 
 
+@pytest.mark.parametrize("case", ["forward unsure", "both unsure", "forward sure", "two cameras"])
+def test_legs_the_forward_pass_is_unsure_of_take_the_backward_names_it_is_sure_of_the_other_way_round(case):
+    """Back from a blackout in a split leap, the forward identification names the legs the
+    mirror way round in frames 100-149 and flags them unsure (their side not yet seen); the
+    backward pass tracked them right through and is sure. Those frames take the backward legs.
+    Not where the backward pass is unsure too, nor where the forward pass is sure, nor with
+    two cameras."""
+    F = 300
+    t = np.arange(F) / FPS
+    b = np.zeros((F, 8, 3))
+    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    a = b.copy()
+    a[100:150, [LK, RK, LA, RA]] = b[100:150, [RK, LK, RA, LA]]
+    a[120:125, LA] = np.nan  # an ankle one pass leaves unnamed does not stop the rest
+    unsure_f, unsure_b = np.zeros(F, bool), np.zeros(F, bool)
+    unsure_f[100:150] = case != "forward sure"
+    unsure_b[:] = case == "both unsure"
+    none = np.zeros(F, np.int64)
+    markers, from_b = choose(PassResult(a, none, np.zeros(F), legs_unsure=unsure_f),
+                             PassResult(b, none, np.zeros(F), legs_unsure=unsure_b), t,
+                             picked_up=case != "two cameras")
+    if case == "forward unsure":
+        assert np.allclose(markers, b) and np.array_equal(np.flatnonzero(from_b), np.arange(100, 150))
+    else:
+        assert np.array_equal(np.isnan(markers), np.isnan(a)) and np.allclose(markers[~np.isnan(a)], a[~np.isnan(a)])
+        assert not from_b.any()
+
+
 def test_where_both_passes_doubt_a_name_the_fit_splits_the_stretch_between_their_renames():
     """Two hands pass each other at frame 135 and each pass's tracking swaps them there: the
     forward pass has the wrists the wrong way round in 135-157 and renames them at 158, the
