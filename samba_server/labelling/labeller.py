@@ -60,6 +60,20 @@ def _unnamed(n: int, assign: np.ndarray) -> np.ndarray:
     return np.flatnonzero(~named)
 
 
+def _named_on(pts: Points3D, assign: np.ndarray) -> np.ndarray:
+    """(8, 3) m: each marker at the point assign (8,) names it on (-1: NaN, unnamed)."""
+    out = np.full((N_MARKERS, 3), np.nan)
+    out[assign >= 0] = pts.X[assign[assign >= 0]]
+    return out
+
+
+def _recoverable(pts: Points3D, assign: np.ndarray) -> np.ndarray:
+    """The points no marker is named on (assign (8,), -1 = none) that a lost marker may be
+    found again on: seen by >= 3 views, or missed by at most one view that should see them."""
+    free = _unnamed(len(pts), assign)
+    return free[(pts.n_views[free] >= 3) | (pts.unexplained[free] <= 1)]
+
+
 @dataclass(frozen=True)
 class LabelConfig:
     """``[labelling]`` in configs/server.toml (distances in metres, times in seconds)."""
@@ -875,11 +889,9 @@ class Labeller:
         body = self._body
         self._recover_leg(pts, assign, arow, row_pt)
         self._recover_ends(pts, assign, arow, row_pt)
-        named = np.full((N_MARKERS, 3), np.nan)
-        named[assign >= 0] = pts.X[assign[assign >= 0]]
+        named = _named_on(pts, assign)
         lost = np.flatnonzero(assign < 0)
-        free = _unnamed(len(pts), assign)
-        free = free[(pts.n_views[free] >= 3) | (pts.unexplained[free] <= 1)]
+        free = _recoverable(pts, assign)
         if not lost.size or not free.size:
             return
         X = pts.X[free]
@@ -1015,11 +1027,11 @@ class Labeller:
         cfg = self.config
         if self._facing is None or len(self.rig) < 3 or cfg.shins_margin_m == float("inf"):
             return
+        right = right_of(self._facing)
         for ends, anchors, below in (((LA, RA), (LK, RK), True), ((LK, RK), (LA, RA), False)):
             if (assign[list(ends)] >= 0).any() or (assign[list(anchors)] < 0).any():
                 continue
-            free = _unnamed(len(pts), assign)
-            free = free[(pts.n_views[free] >= 3) | (pts.unexplained[free] <= 1)]
+            free = _recoverable(pts, assign)
             if len(free) < 2:
                 return
             X = pts.X[free]
@@ -1028,24 +1040,15 @@ class Labeller:
             lower = (X[:, None, 2] < A[None, :, 2]) if below else (X[:, None, 2] > A[None, :, 2])
             doubt = np.where(pts.n_views[free] < 3, cfg.unexplained_m * pts.unexplained[free], 0.0)
             cost = np.where((e <= self._body.tol) & lower, e + doubt[:, None], np.inf)
-            right = right_of(self._facing)
-            trials = []
-            for i in range(len(free)):
-                for j in range(len(free)):
-                    c = cost[i, 0] + cost[j, 1]
-                    if i == j or not np.isfinite(c):
-                        continue
-                    trials.append((c, i, j))
-            trials.sort()
-            if not trials:
+            pairing = cost[:, :1] + cost[:, 1]  # (P, P) m: the left end on point i, the right one on j
+            np.fill_diagonal(pairing, np.inf)
+            best, runner_up = np.sort(pairing, axis=None)[:2]
+            if not np.isfinite(best) or runner_up - best < cfg.shins_margin_m:
                 continue
-            c, i, j = trials[0]
-            if len(trials) > 1 and trials[1][0] - c < cfg.shins_margin_m:
-                continue
+            i, j = np.unravel_index(int(np.argmin(pairing)), pairing.shape)
             if float((X[j] - X[i]) @ right) < -cfg.crossed_m:
                 continue
-            named = np.full((N_MARKERS, 3), np.nan)
-            named[assign >= 0] = pts.X[assign[assign >= 0]]
+            named = _named_on(pts, assign)
             named[list(ends)] = X[[i, j]]
             if self._body.violations(named):
                 continue
@@ -1085,8 +1088,7 @@ class Labeller:
         points nobody took (assign (8,): point per marker, -1 = none): pairs of point indices a
         shin apart (within the tolerance), the knee above. Few, so clutter costs little."""
         free = _unnamed(len(pts), assign)
-        named = np.full((N_MARKERS, 3), np.nan)
-        named[assign >= 0] = pts.X[assign[assign >= 0]]
+        named = _named_on(pts, assign)
         X = pts.X[free]
         shin_ok = (np.abs(np.linalg.norm(X[:, None] - X[None], axis=2) - self._body.shin) <= self._body.tol) & \
             (X[:, None, 2] > X[None, :, 2])
