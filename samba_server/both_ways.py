@@ -550,6 +550,26 @@ def _wrist_on_shoulder(fwd: np.ndarray, bwd: np.ndarray) -> list[tuple[int, int,
             for w in (LW, RW) for s in (LS, RS)]
 
 
+def _shoulder_kept(markers: np.ndarray, fwd: np.ndarray, bwd: np.ndarray) -> None:
+    """Where the backward names bwd (F, 8, 3) put a wrist on the forward names fwd's (F, 8, 3)
+    shoulder and leave that shoulder unnamed, and the chosen names markers (F, 8, 3) took the
+    backward pass's view (that wrist there, or the shoulder not named where the forward pass
+    names it), give the shoulder and the wrist their forward names again, in place (unless
+    that names one point twice more often). A shoulder barely moves on the body; a wrist on a
+    shoulder's point is a hand lost at the shoulder: on the saved passes of seeds 3, 601, 602
+    and 606, in the 112 frames where the backward pass named a wrist so, the forward pass's
+    shoulder was right in 108 and the backward wrist in none (005_03 seed 606: the backward
+    pass named the left wrist on the right shoulder for 0.4 s, the choice took it).
+    The other way round is :func:`_wrist_on_shoulder`."""
+    for w, s, hit in _wrist_on_shoulder(bwd, fwd):
+        hit &= _within(markers[:, w], bwd[:, w]) | ~_within(markers[:, s], fwd[:, s])
+        for k in np.flatnonzero(hit):
+            mixed = markers[k].copy()
+            mixed[[w, s]] = fwd[k, [w, s]]
+            if _doubles(mixed) <= _doubles(markers[k]):
+                markers[k] = mixed
+
+
 def _misfits(p: PassResult, frames: np.ndarray) -> np.ndarray:
     """(len(frames),) m^2: how badly pass p's names fit its own solves in each of frames
     (indices): per marker, a named one its frame's rms residual squared (at most
@@ -774,7 +794,9 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     markers at points apart takes the backward names where they fit the solver clearly better
     (:func:`_fits_better`; not with ``fit`` False, as with two cameras), and the backward
     wrists where the chosen ones are those the other way round right after the hands met
-    (:func:`_parted`; not with ``picked_up`` False). Returns ((F, 8, 3)
+    (:func:`_parted`; not with ``picked_up`` False). Where the backward pass named a wrist on
+    the point the forward pass names a shoulder and the chosen names took that view, the two
+    keep their forward names (:func:`_shoulder_kept`). Returns ((F, 8, 3)
     markers, (F,) bool: a name taken from the backward pass)."""
     nf = np.isfinite(fwd.markers).all(axis=2)
     nb = np.isfinite(bwd.markers).all(axis=2)
@@ -858,6 +880,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     markers[np.ix_(parted, [LW, RW])] = bwd.markers[np.ix_(parted, [LW, RW])]
     legs = _unsure_mirrored(markers, fwd, bwd) if picked_up else np.zeros(len(t), bool)
     markers[np.ix_(legs, [LK, RK, LA, RA])] = bwd.markers[np.ix_(legs, [LK, RK, LA, RA])]
+    _shoulder_kept(markers, fwd.markers, bwd.markers)
     return markers, from_b | course | better | parted | legs
 
 

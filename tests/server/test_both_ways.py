@@ -765,6 +765,35 @@ def test_a_wrist_on_the_point_the_backward_pass_names_its_unnamed_shoulder_gives
     assert np.allclose(markers[:100], a[:100]) and np.allclose(markers[130:], a[130:])
 
 
+def test_a_backward_wrist_on_the_forward_shoulder_point_does_not_displace_the_shoulder():
+    """The backward names are taken after a coin-flip identification (the passes never agree
+    after it), but from frame 150 to 170 the backward pass names the left wrist on the point
+    the forward pass names the right shoulder, and leaves that shoulder unnamed (a hand lost at
+    the shoulder, 005_03 on a fresh body). There the right shoulder and the left wrist keep
+    their forward names; every other name of those frames is still the backward one."""
+    from samba_server.both_ways import CLEAR_M
+
+    F = 301
+    t = np.arange(F) / FPS
+    right = np.arange(8 * 3, dtype=float).reshape(8, 3) / 10.0
+    a = np.repeat(right[None], F, axis=0)
+    b = a.copy()
+    a[100:130] = b[100:130] = np.nan
+    b[131:, :, 2] += 0.05  # the passes never agree after the coin flip: the backward names win
+    b[150:170, LW] = a[150:170, RS]
+    b[150:170, RS] = np.nan
+    idf, idb = np.full(F, np.nan), np.full(F, np.nan)
+    idf[0], idf[130], idb[300] = 0.0, 0.0, CLEAR_M
+    fwd = PassResult(a, np.zeros(F, np.int64), np.zeros(F), idf)
+    bwd = PassResult(b, np.zeros(F, np.int64), np.zeros(F), idb)
+    markers, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(131, F))
+    assert np.allclose(markers[150:170, [RS, LW]], a[150:170, [RS, LW]])
+    others = [m for m in range(8) if m not in (RS, LW)]
+    assert np.allclose(markers[131:, others], b[131:, others])
+    assert np.allclose(markers[np.r_[131:150, 170:F]], b[np.r_[131:150, 170:F]])
+
+
 def test_a_name_picked_up_after_a_gap_gives_way_to_the_backward_track_of_that_point():
     """The high rig's climb (001_14): the body hides both shoulders for 20 frames (140-159); when
     the right one comes back, the forward pass names it the left shoulder (its prediction drifted)
