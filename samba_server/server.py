@@ -330,7 +330,7 @@ class Server:
         except Exception:
             log.exception("solver failed on frame t=%.3f s (frame left unsolved)", t)
         if np.isfinite(joints).all():
-            self.labeller.observe(t, self._marker_view(joints))
+            self.labeller.observe(t, self._marker_view(joints), residual)
         return markers, joints, residual, bounds
 
     def _frame(self, frame) -> PoseMessage:

@@ -138,7 +138,8 @@ class LabelConfig:
     audit_margin: float = 1.0  #: ... and take the identification when it scores this much more than the tracked names
     audit_agree: float = 0.3  #: score, per marker, of agreeing with a tracked name in that identification
     audit_extend_margin: float = 0.5  #: an identification that only adds names to the tracked ones needs this much more
-    audit_move_margin: float = 2.0  #: ... and one that moves >= 2 tracked names to other points, naming < 2 more, this much
+    audit_move_margin: float = 2.0  #: ... and one that moves >= 2 tracked names to other points, naming < 2 more, this much ...
+    audit_fit_m: float = 0.01  #: ... and never while the solver fits the tracked names within this (rms m; >= 3 cameras; 0: by score alone)
     audit_shoulder_s: float = 0.05  #: tracked names lacking a shoulder are audited only once it has been unnamed this long (>= 3 cameras)
     audit_shoulder_lost_s: float = 0.5  #: ... and this long, a clear identification naming both shoulders and as many markers replaces them
     facing_weight: float = 3.0  #: weight of the known facing when identifying ...
@@ -223,6 +224,7 @@ class Labeller:
         self._vel = np.zeros((N_MARKERS, 3))
         self._seen = np.full(N_MARKERS, -np.inf)
         self._skel: list[tuple[float, np.ndarray]] = []
+        self._fit = (-math.inf, math.nan)  # (t s, rms residual m) of the last solved pose
         self._facing: np.ndarray | None = None
         self._t_facing = -np.inf
         self._centres: list[tuple[float, np.ndarray]] = []
@@ -266,10 +268,12 @@ class Labeller:
         self._rescue_blobs: list[tuple[np.ndarray, np.ndarray]] = []
 
     # ------------------------------------------------------------------ feedback from the server
-    def observe(self, t: float, joints: np.ndarray) -> None:
-        """Remember a solved pose: t seconds, joints (13, 3) metres (NaN frames are ignored)."""
+    def observe(self, t: float, joints: np.ndarray, residual: float = math.nan) -> None:
+        """Remember a solved pose: t seconds, joints (13, 3) metres (NaN frames are ignored),
+        residual: its rms marker error (m), how well a body fits the names given."""
         if np.all(np.isfinite(joints)):
             self._skel = (self._skel + [(t, joints[list(MARKER_JOINT)].copy())])[-2:]
+            self._fit = (t, float(residual))
 
     def refit(self, markers: np.ndarray, model: np.ndarray, residual: float, t: float,
               trial: Callable[[np.ndarray], float]) -> np.ndarray | None:
@@ -330,6 +334,7 @@ class Labeller:
         self._pos[:] = np.nan
         self._seen[:] = -np.inf
         self._skel = []
+        self._fit = (-math.inf, math.nan)
         self._facing = None
         self._t_lost = self._t_ambiguous = None
         self._steady = self._best_prev = None
@@ -1359,6 +1364,16 @@ class Labeller:
             missed = missed - pts.behind
         return np.where(pts.n_views >= 3, 0.0, np.minimum(0.9 * missed, 2.0))
 
+    def _fitted(self, t: float) -> bool:
+        """The solver fitted the names of the frame before t s within ``audit_fit_m`` (rms), with
+        >= 3 cameras: names a body fits that well are not moved by an identification. Its
+        anatomy has knees below the shoulders; a dancer's kick lifted a tracked ankle above
+        them, and an audit moved the shoulders and wrists onto the kicking leg and an arm
+        (005_05 on a x1.25 body, 0.08 cm rms before: 40-63 cm off until the blackout)."""
+        t_fit, residual = self._fit
+        return len(self.rig) >= 3 and t - t_fit <= self.config.track_timeout and \
+            residual <= self.config.audit_fit_m
+
     def _audit(self, pts: Points3D, tracked_out: np.ndarray, assign: np.ndarray, q: LabelQuality,
                t: float) -> tuple[np.ndarray, LabelQuality] | None:
         """Check the tracked names of this frame against a fresh identification, every
@@ -1370,7 +1385,8 @@ class Labeller:
         (``min_margin`` over every rival) and scores ``audit_margin`` more than they do
         (``audit_extend_margin`` when it only adds names: a wrist whose track and skeleton lost
         it), or names >= 2 more markers where the tracked names lack a shoulder (as many, naming
-        both shoulders, when one has been unnamed ``audit_shoulder_lost_s``).
+        both shoulders, when one has been unnamed ``audit_shoulder_lost_s``); never one that
+        moves >= 2 tracked names (naming < 2 more) the solver fitted well (:meth:`_fitted`).
         tracked_out: (8, 3) the tracked names; assign: (8,) their points (-1 = unnamed). Returns
         (8, 3) markers and quality, or None."""
         cfg = self.config
@@ -1411,6 +1427,8 @@ class Labeller:
         # moving names (>= 2 of them without naming two more, or any while all eight are named
         # on points: then a free sure point is a ghost or a reflection, not a lost marker)
         complete = bool((assign >= 0).all())
+        if moved >= 2 and gained < 2 and self._fitted(t):
+            return None
         need = cfg.audit_extend_margin if extends else \
             (cfg.audit_move_margin if (moved >= 2 and gained < 2) or complete else cfg.audit_margin)
         if tracked is None:
