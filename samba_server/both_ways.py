@@ -796,7 +796,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     wrists where the chosen ones are those the other way round right after the hands met
     (:func:`_parted`; not with ``picked_up`` False). Where the backward pass named a wrist on
     the point the forward pass names a shoulder and the chosen names took that view, the two
-    keep their forward names (:func:`_shoulder_kept`). Returns ((F, 8, 3)
+    keep their forward names (:func:`_shoulder_kept`; not with ``picked_up`` False: measured
+    with four cameras only). Returns ((F, 8, 3)
     markers, (F,) bool: a name taken from the backward pass)."""
     nf = np.isfinite(fwd.markers).all(axis=2)
     nb = np.isfinite(bwd.markers).all(axis=2)
@@ -880,7 +881,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     markers[np.ix_(parted, [LW, RW])] = bwd.markers[np.ix_(parted, [LW, RW])]
     legs = _unsure_mirrored(markers, fwd, bwd) if picked_up else np.zeros(len(t), bool)
     markers[np.ix_(legs, [LK, RK, LA, RA])] = bwd.markers[np.ix_(legs, [LK, RK, LA, RA])]
-    _shoulder_kept(markers, fwd.markers, bwd.markers)
+    if picked_up:
+        _shoulder_kept(markers, fwd.markers, bwd.markers)
     return markers, from_b | course | better | parted | legs
 
 
