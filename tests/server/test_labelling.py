@@ -1476,7 +1476,8 @@ def test_an_audit_does_not_move_tracked_names_a_body_fits(fit_m):
     c = _HIGH_KICK
     cfg = LabelConfig() if fit_m is None else replace(LabelConfig(), audit_fit_m=fit_m)
     lab, pts, assign, tracked = _traced_audit(c, cfg)
-    lab._fit = (c["t"] - 1 / FPS, 0.0008)  # the solve of the frame before (Labeller.observe)
+    # the frame before's solve, 0.08 cm rms (its pose does not matter to the audit)
+    lab.observe(c["t"] - 1 / FPS, np.zeros((13, 3)), residual=0.0008)
     lab._t_facing = c["t"] - 1 / FPS
     lab._centres = [(c["t"] - 0.5, np.zeros(3)), (c["t"], 0.5 * np.array([0.053, -0.586, 1.835]))]  # rising
     got = lab._audit(pts, tracked, assign, LabelQuality(7, len(pts), 0.05, 0.01, "tracking"), c["t"])
