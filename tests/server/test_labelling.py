@@ -1429,6 +1429,19 @@ def _traced_audit(c: dict, cfg: LabelConfig) -> tuple:
     return lab, pts, assign, tracked
 
 
+def _audit_moves(lab: Labeller, pts: Points3D, assign: np.ndarray, tracked: np.ndarray, n_labelled: int,
+                 t: float) -> np.ndarray | None:
+    """(8,) bool: the tracked names (8, 3) (on points assign (8,)) that an audit of the traced
+    frame's points moves more than 5 cm, renaming (mode "identified"); None when it keeps them."""
+    from samba_server.labelling.labeller import LabelQuality
+
+    got = lab._audit(pts, tracked, assign, LabelQuality(n_labelled, len(pts), 0.05, 0.01, "tracking"), t)
+    if got is None:
+        return None
+    assert got[1].mode == "identified"
+    return np.isfinite(tracked).all(axis=1) & (np.linalg.norm(np.nan_to_num(got[0] - tracked), axis=1) > 0.05)
+
+
 @pytest.mark.parametrize("move_margin", [None, 1.0])
 def test_an_audit_does_not_move_a_crouching_subjects_tracked_names(move_margin):
     """A fresh identification scores a crouch badly (a knee near its shoulder is unusual) and
@@ -1436,18 +1449,14 @@ def test_an_audit_does_not_move_a_crouching_subjects_tracked_names(move_margin):
     benchmark's take then never recovered: 29.5 % of frames right). An audit that moves >= 2
     tracked names needs ``audit_move_margin`` (2.0) over them, not ``audit_margin`` (1.0):
     with that the tracked names stand; with the old margin they are overturned."""
-    from samba_server.labelling.labeller import LabelQuality
-
     c = _CROUCH
     cfg = LabelConfig() if move_margin is None else replace(LabelConfig(), audit_move_margin=move_margin)
     lab, pts, assign, tracked = _traced_audit(c, cfg)
-    got = lab._audit(pts, tracked, assign, LabelQuality(6, len(pts), 0.05, 0.01, "tracking"), c["t"])
+    moved = _audit_moves(lab, pts, assign, tracked, 6, c["t"])
     if move_margin is None:
-        assert got is None
+        assert moved is None
     else:
-        assert got is not None and got[1].mode == "identified"
-        moved = np.isfinite(tracked).all(axis=1) & (np.linalg.norm(np.nan_to_num(got[0] - tracked), axis=1) > 0.05)
-        assert moved.sum() >= 2
+        assert moved is not None and moved.sum() >= 2
 
 
 #: a traced frame of a rendered take (a dance, 005_05, on a x1.25 body): the right leg kicked up,
@@ -1471,8 +1480,6 @@ def test_an_audit_does_not_move_tracked_names_a_body_fits(fit_m):
     kicking leg and an arm (the take then had them 40-63 cm off until its blackout, 83.2 % of
     frames right). While the solver fits the tracked names within ``audit_fit_m`` (1 cm rms),
     an audit that moves >= 2 of them is not taken; scored alone (0), it is."""
-    from samba_server.labelling.labeller import LabelQuality
-
     c = _HIGH_KICK
     cfg = LabelConfig() if fit_m is None else replace(LabelConfig(), audit_fit_m=fit_m)
     lab, pts, assign, tracked = _traced_audit(c, cfg)
@@ -1480,13 +1487,11 @@ def test_an_audit_does_not_move_tracked_names_a_body_fits(fit_m):
     lab.observe(c["t"] - 1 / FPS, np.zeros((13, 3)), residual=0.0008)
     lab._t_facing = c["t"] - 1 / FPS
     lab._centres = [(c["t"] - 0.5, np.zeros(3)), (c["t"], 0.5 * np.array([0.053, -0.586, 1.835]))]  # rising
-    got = lab._audit(pts, tracked, assign, LabelQuality(7, len(pts), 0.05, 0.01, "tracking"), c["t"])
+    moved = _audit_moves(lab, pts, assign, tracked, 7, c["t"])
     if fit_m is None:
-        assert got is None
+        assert moved is None
     else:
-        assert got is not None and got[1].mode == "identified"
-        moved = np.isfinite(tracked).all(axis=1) & (np.linalg.norm(np.nan_to_num(got[0] - tracked), axis=1) > 0.05)
-        assert moved[[LS, RS, LW, RW]].sum() >= 2
+        assert moved is not None and moved[[LS, RS, LW, RW]].sum() >= 2
 
 
 #: a traced frame of a rendered take (jumps and a turn around, 001_01, on another body, seed 31):
