@@ -299,6 +299,8 @@ def main() -> int:
     title = "Marker identification (benchmarks/labelling.py)"
     if args.start:  # another part of the clips: its own section, the default one stays
         title += f", clips from {args.start:g} s (--start {args.start:g})"
+    if args.seconds != 8.0:  # longer (or shorter) parts: their own section
+        title += f", up to {args.seconds:g} s of each clip (--seconds {args.seconds:g})"
     if args.body_scale is not None:
         title += f", bodies x{args.body_scale:g} (--body-scale {args.body_scale:g})"
     if own_rig is not None:
