@@ -29,6 +29,7 @@ the section it writes.
 
     python benchmarks/labelling.py [--data ../shared/data/cmu-bvh] [--cameras 4 2] [--codec mjpg]
     python benchmarks/labelling.py --start 8   # the clips' later parts, which the default never runs
+    python benchmarks/labelling.py --seconds 30 --clips 001_01 002_10 001_08 001_14 002_07 002_06 002_05 005_18 002_08 005_12 006_12 005_04   # the 12 clips of >= 10 s, whole
     python benchmarks/labelling.py --body-scale 0.75   # child-sized bodies (1.25: very tall adults)
     python benchmarks/labelling.py --calibration benchmarks/rigs/high.toml   # another rig than samba-sim's
     python benchmarks/labelling.py --seed 601 --cameras 4   # bodies no rule was traced on: the held-out figure
