@@ -352,8 +352,10 @@ def _doubted(renamed: np.ndarray, named: np.ndarray, t: np.ndarray, window_s: fl
         out[k] = marker_bits(live)
         if confirmed is not None:
             t_fix[confirmed[k]] = np.nan
-        if own is not None:  # a rename of its own the other pass does not confirm: what came before it was not
-            t_fix[bit_markers(int(own[k]) & ~int(renamed[k]))] = np.nan  # what the later one replaced
+        if own is not None:
+            # a rename of its own that the other pass does not confirm: the names before it
+            # are not the ones a later rename replaced
+            t_fix[bit_markers(int(own[k]) & ~int(renamed[k]))] = np.nan
         t_fix[bit_markers(renamed[k])] = t[k]
     return out
 
