@@ -23,6 +23,14 @@ FPS = 60.0
 MIRROR = [RS, LS, RW, LW, RK, LK, RA, LA]  # names of the mirror image, by marker
 
 
+def _in_a_row(F: int) -> np.ndarray:
+    """(F, 8, 3) m: the eight markers standing still 1 m apart along x, the namings the choice
+    tests start from."""
+    out = np.zeros((F, 8, 3))
+    out[:, :, 0] = np.arange(8)
+    return out
+
+
 def _packets(rig, markers: np.ndarray, t: float, rng) -> list[MarkerPacket]:
     """One unlabelled MarkerPacket per camera: markers (8, 3) projected, NaN rows unseen."""
     out = []
@@ -344,8 +352,7 @@ def test_a_rename_that_left_the_marker_unnamed_is_checked_where_it_is_named_next
     again only after NEXT_S, or named where the backward pass does not, confirms nothing."""
     F = 301
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b = _in_a_row(F)
     a = b.copy()
     a[140:200, LW] += 0.5  # wrong for the forward pass ...
     a[200:202, LW] = np.nan  # ... unnamed when it found that out
@@ -373,8 +380,7 @@ def test_a_gap_in_the_forward_names_is_filled_where_the_backward_pass_names_the_
     fill at it."""
     F = 100
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b = _in_a_row(F)
     a = b.copy()
     a[40:60, LW] = np.nan
     none = np.zeros(F, np.int64)
@@ -403,8 +409,7 @@ def test_a_forward_rename_both_passes_refute_is_undone_until_they_agree_again():
     the same way)."""
     F = 120
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b = _in_a_row(F)
     a = b.copy()
     legs = [LK, LA, RK, RA]
     a[50:80, legs] = b[50:80][:, [RK, RA, LK, LA]]  # the forward pass swaps the legs at frame 50
@@ -438,8 +443,7 @@ def test_a_point_the_two_passes_name_as_different_markers_is_named_neither_way()
     name stands there (the mix used to be refused whole, keeping both wrong forward names)."""
     F = 301
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b = _in_a_row(F)
     a = b.copy()
     a[140:200, LW] += 0.5
     a[140:200, RW] = b[140:200, LW]
@@ -462,8 +466,7 @@ def test_a_confirmed_rename_doubts_the_names_back_to_where_the_passes_last_agree
     stretch longer than APART_S only its last APART_S."""
     F = 400
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b = _in_a_row(F)
     a = b.copy()
     a[40:170, LW] = b[40:170, RS] + [0.0, 0.0, 0.2]  # near the shoulder, not on it
     ren_f = np.zeros(F, np.int64)
@@ -489,8 +492,7 @@ def test_a_swap_of_both_legs_mended_in_two_steps_is_doubted_back_to_where_it_beg
     see the two tests of whole legs below)."""
     F = 300
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)
+    b = _in_a_row(F)
     a = b.copy()
     a[100:200, [LK, RK, LA, RA]] = b[100:200, [RK, LK, RA, LA]]
     a[197:200, [LK, RK]] = b[197:200, [LK, RK]]  # the knees came right by themselves
@@ -516,8 +518,7 @@ def _dancer_legs(F: int) -> tuple[np.ndarray, np.ndarray]:
     1 m apart on a line, the legs side by side (shins 45 cm; a knee of one leg and the ankle of
     the other 53-54 cm apart)."""
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)
+    b = _in_a_row(F)
     legs = np.array([[-0.1, 0.0, 0.5], [0.1, 0.1, 0.5], [-0.1, -0.15, 0.08], [0.1, 0.3, 0.1]])  # LK RK LA RA
     b[:, [LK, RK, LA, RA]] = legs + [5.0, 0.0, 0.0]
     return t, b
@@ -586,8 +587,7 @@ def test_wrists_the_forward_pass_swapped_as_the_hands_parted_take_the_backward_n
     sep[111:130] = np.linspace(0.05, 0.30, 19)
     if case == "they meet again":
         sep[150:160] = 0.05
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # the other markers 1 m apart
+    b = _in_a_row(F)  # the other markers 1 m apart
     b[:, LW] = [2.5, 0.0, 1.2] - sep[:, None] * [0.0, 0.5, 0.0]
     b[:, RW] = [2.5, 0.0, 1.2] + sep[:, None] * [0.0, 0.5, 0.0]
     a = b.copy()
@@ -610,8 +610,7 @@ def test_legs_the_forward_pass_is_unsure_of_take_the_backward_names_it_is_sure_o
     two cameras."""
     F = 300
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b = _in_a_row(F)
     a = b.copy()
     a[100:150, [LK, RK, LA, RA]] = b[100:150, [RK, LK, RA, LA]]
     a[120:125, LA] = np.nan  # an ankle one pass leaves unnamed does not stop the rest
@@ -638,8 +637,7 @@ def test_where_both_passes_doubt_a_name_the_fit_splits_the_stretch_between_their
     backward after. Without residuals the forward names stay."""
     F = 300
     t = np.arange(F) / FPS
-    truth = np.zeros((F, 8, 3))
-    truth[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    truth = _in_a_row(F)
     a, b = truth.copy(), truth.copy()
     a[135:158, [LW, RW]] = truth[135:158, [RW, LW]]
     b[128:135, [LW, RW]] = truth[128:135, [RW, LW]]
@@ -666,8 +664,7 @@ def test_names_from_the_standard_pose_the_backward_pass_never_agreed_with_are_no
     any others."""
     F = 300
     t = np.arange(F) / FPS
-    truth = np.zeros((F, 8, 3))
-    truth[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    truth = _in_a_row(F)
     a = truth.copy()
     a[108:112, RS] += [0.0, 0.0, 0.3]
     bwd = truth.copy()
@@ -695,8 +692,7 @@ def test_a_backward_rename_doubts_its_names_only_up_to_where_the_forward_pass_co
     frame 160, one second after the backward rename), while 101-130 stay forward."""
     F = 301
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b = _in_a_row(F)
     a = b.copy()
     b[101:131, LW] += [0.0, 0.0, 0.5]  # backward wrong there, renamed at 100
     a[140:170, LW] += [0.0, 0.0, 0.3]  # forward wrong there, renamed at 170
@@ -718,8 +714,7 @@ def test_a_short_slip_of_the_forward_name_gives_way_to_the_backward_one_that_kee
     than COURSE_M from that course, and not onto a point another chosen name holds."""
     F = 120
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b = _in_a_row(F)
     b[:, LK, 1] = 0.01 * np.arange(F)  # the left knee walks
     none = np.zeros(F, np.int64)
 
@@ -750,8 +745,7 @@ def test_a_wrist_on_the_point_the_backward_pass_names_its_unnamed_shoulder_gives
     Where the forward pass names the shoulder too (two markers on one point), nothing changes."""
     F = 240
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b = _in_a_row(F)
     a = b.copy()
     a[100:130, LW] = b[100:130, RS]
     a[100:130, RS] = np.nan
@@ -806,8 +800,7 @@ def test_a_confirmed_rename_does_not_doubt_names_back_past_an_earlier_rename_of_
     95.7 % of frames all right)."""
     F = 300
     t = np.arange(F) / FPS
-    right = np.zeros((F, 8, 3))
-    right[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    right = _in_a_row(F)
     legs = [LK, RK, LA, RA]
     swapped = [RK, LK, RA, LA]
     a, b = right.copy(), right.copy()
@@ -832,8 +825,7 @@ def test_a_name_picked_up_after_a_gap_gives_way_to_the_backward_track_of_that_po
     too), nor when the backward pass picked the right shoulder up after a gap of its own."""
     F = 300
     t = np.arange(F) / FPS
-    b = np.zeros((F, 8, 3))
-    b[:, :, 0] = np.arange(8)  # eight markers 1 m apart
+    b = _in_a_row(F)
     b[140:160, [LS, RS]] = np.nan  # both shoulders hidden
     none = np.zeros(F, np.int64)
     a = b.copy()
