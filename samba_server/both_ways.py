@@ -16,9 +16,10 @@ one tracked from the past, one from the future. The forward (live) naming stays,
 - where the forward pass itself found a marker's name wrong within ``window_s`` (1 s) after
   the frame, or later with the two passes naming it otherwise ever since (at most
   ``APART_S``) (``LabelQuality.renamed``: a swap rule, an audit or a re-identification replaced
-  it), the backward pass names that marker at the same point at the rename (tracking it, not
-  renaming it itself; a rename that left the marker unnamed: where the forward pass names it
-  next, at most ``NEXT_S`` later), and the backward pass did not find its own name for it
+  it), the backward pass names that marker at the same point at the rename (within
+  ``ALIKE_M``: the two passes split a merged point along their own tracks, 1-2 cm apart;
+  tracking it, not renaming it itself; a rename that left the marker unnamed: where the
+  forward pass names it next, at most ``NEXT_S`` later), and the backward pass did not find its own name for it
   wrong within ``window_s`` before the frame (a backward rename the forward naming confirms
   likewise; back only to where the forward pass last named the marker at the same point, as
   there the backward name was right: 4 cameras, 49 takes, seeds 3 and 11, 489 -> 469 frames
@@ -65,7 +66,13 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   it, names it at the point both passes named it through the ``AGREED_S`` before, the
   backward name holds from the rename until the two name it alike again: the forward pass's
   own past and the backward pass's future agree against the rule that renamed it (a
-  climber's legs swapped by a rule for 0.6 s on another body);
+  climber's legs swapped by a rule for 0.6 s on another body). A marker of the rename's half
+  of the body that the two named alike through the same stretch and that leaves the backward
+  name within ``JOIN_S`` after the rename went with it (a rule swapped a dancer's ankles, her
+  knees followed by tracking the next frame): it holds the backward name likewise, and where
+  the backward pass leaves such a marker unnamed (hidden) the forward name is dropped (005_17
+  on a fresh body: 92.3 -> 99.0 % of frames all right; a marker both passes leave unnamed
+  while they name others counts as named alike, a blackout does not);
 - where the forward pass names nothing and the backward names are not doubted so, the frame
   takes the backward names (the wait for a clear identification after a blackout);
 - where the forward pass leaves a marker unnamed (a hand hidden from a view, a point the
@@ -460,28 +467,44 @@ def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray) -> np.ndarray:
 
 
 def _refuted(renamed: np.ndarray, nf: np.ndarray, nb: np.ndarray, alike: np.ndarray, t: np.ndarray,
-             agreed_s: float = AGREED_S) -> np.ndarray:
+             agreed_s: float = AGREED_S, join_s: float = JOIN_S) -> np.ndarray:
     """(F, 8) bool: the frames from a forward rename on, until the two passes name the
-    marker alike again (or the forward pass renames it again), of each marker the rename gave
-    another point to where the backward pass, reaching the rename tracking, names it at the
-    point both passes named it in every frame of the ``agreed_s`` s before: the forward
-    pass's own past and the backward pass's future agree against the rule that renamed it.
+    marker alike again (or the forward pass renames it again, or neither names it), of each
+    marker the rename gave another point to where the backward pass, reaching the rename
+    tracking, names it at the point both passes named it in every frame of the ``agreed_s`` s
+    before: the forward pass's own past and the backward pass's future agree against the rule
+    that renamed it. Likewise from the first frame it leaves the backward name, for each marker
+    of the rename's half of the body (the legs; the shoulders and wrists) the rename did not
+    rename, named alike through the same ``agreed_s``, that does so within ``join_s`` after
+    the rename: it went with the rename (a dancer's knees, tracked onto each other's points
+    the frame after a rule swapped her ankles). Where the backward pass leaves the marker
+    unnamed, the frame is marked too: the forward name is wrong there as well.
     Not after a shorter agreement: right after a blackout both passes can name a subject the
     same wrong way (two cameras, a dancer's legs named the mirror way round by the forward
     identification and the backward tracking alike), and the rename mends that. renamed: (F,)
-    int bits; nf, nb: (F, 8) the forward, backward pass names the marker; alike: (F, 8) both
-    name it at the same point; t: (F,) s."""
+    int bits; nf, nb: (F, 8) the forward, backward pass names the marker; alike: (F, 8) the two
+    name it alike (at the same point, or neither while both name other markers); t: (F,) s."""
     F = len(nf)
     out = np.zeros_like(nf)
     bits = bit_markers(renamed)
+
+    def hold(k: int, m: int) -> None:  # the backward name from frame k until the two agree again
+        j = k
+        while j < F and (nb[j, m] or nf[j, m]) and not alike[j, m] and not (j > k and bits[j, m]):
+            j += 1
+        out[k:j, m] = True
+
     for k, m in zip(*np.nonzero(bits)):
         before = np.flatnonzero(t[:k] >= t[k] - agreed_s)
         if t[0] > t[k] - agreed_s or not alike[before, m].all() or alike[k, m] or not (nf[k, m] and nb[k, m]):
             continue
-        j = k
-        while j < F and nb[j, m] and not alike[j, m] and not (j > k and bits[j, m]):
-            j += 1
-        out[k:j, m] = True
+        hold(k, m)
+        for n in np.flatnonzero(bit_markers(int(_halves(1 << int(m)))) & ~bits[k]):
+            j = k
+            while j < F and alike[j, n] and t[j] - t[k] <= join_s:
+                j += 1
+            if alike[before, n].all() and j < F and t[j] - t[k] <= join_s and nf[j, n] and not bits[j, n]:
+                hold(j, n)
     return out
 
 
@@ -564,7 +587,10 @@ def _shoulder_kept(markers: np.ndarray, fwd: np.ndarray, bwd: np.ndarray) -> Non
     shoulder and leave that shoulder unnamed, and the chosen names markers (F, 8, 3) took the
     backward pass's view (that wrist there, or the shoulder not named where the forward pass
     names it), give the shoulder and the wrist their forward names again, in place (unless
-    that names one point twice more often). A shoulder barely moves on the body; a wrist on a
+    that names one point twice more often, or the forward pass's other shoulder is on a point
+    the backward pass names as another marker: a climber's every marker named one place on by
+    the forward pass for 0.4 s, and the rule put back two of those wrong names, 001_14 on a
+    fresh body). A shoulder barely moves on the body; a wrist on a
     shoulder's point is a hand lost at the shoulder: on the saved passes of seeds 3, 601, 602
     and 606, in the 112 frames where the backward pass named a wrist so, the forward pass's
     shoulder was right in 108 and the backward wrist in none (005_03 seed 606: the backward
@@ -572,6 +598,10 @@ def _shoulder_kept(markers: np.ndarray, fwd: np.ndarray, bwd: np.ndarray) -> Non
     The other way round is :func:`_wrist_on_shoulder`."""
     for w, s, hit in _wrist_on_shoulder(bwd, fwd):
         hit &= _within(markers[:, w], bwd[:, w]) | ~_within(markers[:, s], fwd[:, s])
+        other = RS if s == LS else LS
+        # not where the forward pass's other shoulder is on a point the backward pass names as
+        # another marker: its upper body is named one place on, not a hand lost at a shoulder
+        hit &= ~_within(fwd[:, other, None], np.delete(bwd, other, axis=1)).any(axis=1)
         for k in np.flatnonzero(hit):
             mixed = markers[k].copy()
             mixed[[w, s]] = fwd[k, [w, s]]
@@ -818,10 +848,11 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     # all of them and the two namings agree as a whole (>= 4 markers named by both, none named
     # otherwise), for every marker of the halves of the body it renamed (the legs; the shoulders
     # and wrists)
-    alike = marker_bits(both | _renamed_to_none(fwd.renamed, nf, nb, both, t))
+    near = _within(fwd.markers, bwd.markers, ALIKE_M)  # one point (or one merged point split by each pass)
+    alike = marker_bits(near | _renamed_to_none(fwd.renamed, nf, nb, both, t))
     agree = alike & ~bwd.renamed.astype(np.int64)
     renamed = fwd.renamed.astype(np.int64)
-    whole = ((nf & nb).sum(axis=1) >= 4) & (same | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
+    whole = ((nf & nb).sum(axis=1) >= 4) & (near | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
     confirmed = np.where(whole & (renamed != 0), _halves(renamed), renamed & agree)
     ident_f = _standard_pose_clear(fwd.identified)
     # the two passes agreeing as a whole settle a coin flip: later frames do not descend from it
@@ -843,7 +874,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     flip = (lin_f < COIN_M) & (lin_b >= CLEAR_M) & (nb.sum(axis=1) >= np.minimum(nf.sum(axis=1), 4)) \
         & ~same[:, [LS, RS]].all(axis=1)
     bridged = _bridged(nf, nb, both)
-    refuted = _refuted(fwd.renamed, nf, nb, both, t)
+    # (a marker both leave unnamed while they name others is named alike; a blackout is no agreement)
+    refuted = _refuted(fwd.renamed, nf, nb, both | (~nf & ~nb & (nf.any(axis=1) & nb.any(axis=1))[:, None]), t)
     shin = _shin_lengths(fwd.markers, both)
     doubted_f = bit_markers(doubt_f)  # (F, 8) the markers the forward pass doubts
     split_b = _split_doubts(fwd, bwd, bit_markers(doubt_f & doubt_b) & nf & nb & ~same) if fit \
@@ -859,16 +891,18 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
             markers[k], from_b[k] = bwd.markers[k], True
             continue
         sure_b = nb[k] & (~bit_markers(doubt_b[k]) | split_b[k])  # backward names not doubted, or split so
-        take = doubted_f[k] & sure_b & ~same[k]
+        take = (doubted_f[k] & ~same[k] | refuted[k]) & sure_b
         if take.any():
             take |= ~nf[k] & sure_b  # a naming found wrong in part: its gaps are filled in too
-        take |= (bridged[k] | refuted[k]) & sure_b
+        take |= bridged[k] & sure_b
         if take.any():
             take = _whole_shins(take, fwd.markers[k], bwd.markers[k], nb[k] & ~same[k], shin)
-        if not take.any():
+        drop = refuted[k] & ~nb[k] & nf[k]  # refuted where the backward pass names it nowhere
+        if not (take.any() or drop.any()):
             continue
         mixed = markers[k].copy()
         mixed[take] = bwd.markers[k][take]
+        mixed[drop] = np.nan
         mixed[_disputed(mixed, take)] = np.nan
         if _doubles(mixed) <= _doubles(fwd.markers[k]):
             markers[k], from_b[k] = mixed, True

@@ -164,8 +164,9 @@ class LabelQuality:
     converted at 0.1 m per score unit); residual_m: rms distance between named markers and
     their predictions; mode: "tracking", "identified" or "lost"; overridden: named markers
     whose blob a mote had labelled otherwise; renamed: bit m set when marker m's name, held
-    until the frame before, was found wrong in this one and replaced (a swap rule, an audit or an
-    identification), 0 when none was.
+    until the frame before, was found wrong in this one and replaced (a swap rule, an audit, an
+    identification, or two legs' markers tracked crossed placed uncrossed either side of their
+    merged point), 0 when none was.
     """
 
     n_labelled: int = 0
@@ -1487,7 +1488,12 @@ class Labeller:
         the names the hands part with come from this split. A knee and the other leg's ankle (a
         foot kicked back behind the other knee) are split along their predictions only for
         ``split_share_s`` after they met on the point, then both stay on it: their tracks, split
-        from it frame after frame, keep the direction they met in while the legs turn.
+        from it frame after frame, keep the direction they met in while the legs turn. Two
+        knees or ankles named crossed in the frame before (by ``crossed_m``) and now placed
+        uncrossed are renamed (:attr:`LabelQuality.renamed`): each name moves to the
+        other's marker, as a swap rule would move it, and the offline choice
+        (:mod:`samba_server.both_ways`) doubts the names before, as after any rename (a
+        dancer's legs named the mirror way round after a blackout, mended so 0.6 s later).
         With two cameras the wrists' tracks are too often on ghosts: :meth:`_wrists_split`
         chooses. out (8, 3) in place; assign (8,) point per marker (-1: none); pred (8, 3) the
         markers' predictions; right (3,) the subject's right or None."""
@@ -1512,6 +1518,8 @@ class Labeller:
             if self._t_frame - self._sharing.get((m, n), self._t_frame) > cfg.split_share_s:
                 continue  # their predictions, split from this point for a while, say no more where they are
             legs = (m, n) in _LEG_PAIRS
+            if legs and right is not None and self._crossed_last(m, n, right):
+                self._renamed |= (1 << m) | (1 << n)  # named crossed, placed uncrossed: renamed
             measured = self._measured_split(pts, int(p), 2.0 * off, named,
                                             cfg.split_legs_sigma_px if legs else
                                             cfg.split_wrists_sigma_px if wrists else cfg.split_sigma_px)
@@ -1527,6 +1535,14 @@ class Labeller:
                 off = 0.5 * measured
             out[m] = out[m] + off
             out[n] = out[n] - off
+
+    def _crossed_last(self, m: int, n: int, right: np.ndarray) -> bool:
+        """Whether the left marker m and the right one n were both named in the frame before,
+        n at least ``crossed_m`` left of m along the subject's right (3,). (Their named places,
+        not the predictions: two knees on a bad 2-view point, split there, had velocities that
+        crossed the predictions of a pair named uncrossed.)"""
+        seen = self._seen[[m, n]] >= self._t_prev - 1e-6
+        return bool(seen.all() and float((self._pos[n] - self._pos[m]) @ right) < -self.config.crossed_m)
 
     def _wrists_split(self, out: np.ndarray, pred: np.ndarray, lateral: np.ndarray,
                       tracked: np.ndarray) -> np.ndarray:
