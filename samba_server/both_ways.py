@@ -13,29 +13,28 @@ subject the forward pass measured from its standard pose, starting from the faci
 pass named at the end: :func:`end_facing`), so each frame has two namings:
 one tracked from the past, one from the future. The forward (live) naming stays, except:
 
-- where the forward pass itself found a marker's name wrong within ``window_s`` (1 s) after
-  the frame, or later with the two passes naming it otherwise ever since (at most
-  ``APART_S``) (``LabelQuality.renamed``: a swap rule, an audit or a re-identification replaced
-  it), the backward pass names that marker at the same point at the rename (within
-  ``ALIKE_M``: the two passes split a merged point along their own tracks, 1-2 cm apart;
-  tracking it, not renaming it itself; a rename that left the marker unnamed: where the
-  forward pass names it next, at most ``NEXT_S`` later), and the backward pass did not find its own name for it
-  wrong within ``window_s`` before the frame (a backward rename the forward naming confirms
-  likewise; back only to where the forward pass last named the marker at the same point, as
-  there the backward name was right: 4 cameras, 49 takes, seeds 3 and 11, 489 -> 469 frames
-  not all right; the same cut of the forward doubt lost, 489 -> 552), the frame takes the
-  backward name, and the backward names of the markers the forward pass left unnamed; every
-  marker's of the renamed markers' half of the body (the legs; the shoulders and wrists) when
-  the two namings agree as a whole at the rename (a rename of the ankles says nothing of the
-  wrists). Where the two came to name a marker of that half alike at most ``JOIN_S`` before
-  the rename, without the pass renaming it, it is doubted back from before that: the pass
-  mended a swap of the whole half in two steps (a dancer's knees came right by tracking 3
-  frames before a rule renamed the ankles; fresh seeds, 4 cameras: 1325 -> 1299 frames not
-  all right, no take worse on any saved set). The names a pass corrects were wrong for a
-  while before the correction; a rename the backward pass does not confirm may itself be the
-  mistake. Where a kept forward name and a taken backward one fall on one point, neither
-  stands (the two passes dispute it); a mix that would still name one point twice keeps the
-  forward names;
+- where the forward pass itself found a marker's name wrong within ``window_s`` (1 s) after the
+  frame, or later with the two passes naming it otherwise ever since (at most ``APART_S``)
+  (``LabelQuality.renamed``: a swap rule, an audit or a re-identification replaced it), the
+  backward pass names that marker at the same point at the rename (within ``ALIKE_M``: the two
+  passes split a merged point along their own tracks, 1-2 cm apart; tracking it, not renaming
+  it itself; a rename that left the marker unnamed: where the forward pass names it next, at
+  most ``NEXT_S`` later), and the backward pass did not find its own name for it wrong within
+  ``window_s`` before the frame (a backward rename the forward naming confirms likewise; back
+  only to where the forward pass last named the marker at the same point, as there the backward
+  name was right: 4 cameras, 49 takes, seeds 3 and 11, 489 -> 469 frames not all right; the
+  same cut of the forward doubt lost, 489 -> 552), the frame takes the backward name, and the
+  backward names of the markers the forward pass left unnamed; every marker's of the renamed
+  markers' half of the body (the legs; the shoulders and wrists) when the two namings agree as
+  a whole at the rename (a rename of the ankles says nothing of the wrists). Where the two came
+  to name a marker of that half alike at most ``JOIN_S`` before the rename, without the pass
+  renaming it, it is doubted back from before that: the pass mended a swap of the whole half in
+  two steps (a dancer's knees came right by tracking 3 frames before a rule renamed the ankles;
+  fresh seeds, 4 cameras: 1325 -> 1299 frames not all right, no take worse on any saved set).
+  The names a pass corrects were wrong for a while before the correction; a rename the backward
+  pass does not confirm may itself be the mistake. Where a kept forward name and a taken
+  backward one fall on one point, neither stands (the two passes dispute it); a mix that would
+  still name one point twice keeps the forward names;
 - never in frames whose forward names descend from the standard pose's identification (the
   take's first, clear) while the two passes have not once agreed as a whole since: a backward
   pass that came into the standard pose mirrored is the one to doubt there. A climb's forward
@@ -875,7 +874,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         & ~same[:, [LS, RS]].all(axis=1)
     bridged = _bridged(nf, nb, both)
     # (a marker both leave unnamed while they name others is named alike; a blackout is no agreement)
-    refuted = _refuted(fwd.renamed, nf, nb, both | (~nf & ~nb & (nf.any(axis=1) & nb.any(axis=1))[:, None]), t)
+    unnamed_alike = ~nf & ~nb & (nf.any(axis=1) & nb.any(axis=1))[:, None]
+    refuted = _refuted(fwd.renamed, nf, nb, both | unnamed_alike, t)
     shin = _shin_lengths(fwd.markers, both)
     doubted_f = bit_markers(doubt_f)  # (F, 8) the markers the forward pass doubts
     split_b = _split_doubts(fwd, bwd, bit_markers(doubt_f & doubt_b) & nf & nb & ~same) if fit \

@@ -165,8 +165,8 @@ class LabelQuality:
     their predictions; mode: "tracking", "identified" or "lost"; overridden: named markers
     whose blob a mote had labelled otherwise; renamed: bit m set when marker m's name, held
     until the frame before, was found wrong in this one and replaced (a swap rule, an audit, an
-    identification, or two legs' markers tracked crossed placed uncrossed either side of their
-    merged point), 0 when none was.
+    identification, or two knees or ankles named crossed and now placed uncrossed either side
+    of their merged point), 0 when none was.
     """
 
     n_labelled: int = 0
