@@ -791,7 +791,8 @@ def _unsure_mirrored(markers: np.ndarray, fwd: PassResult, bwd: PassResult) -> n
     take the backward legs. A dancer back from a blackout in a split leap, the forward
     identification named the legs the mirror way round, flagged them unsure, and kept them so
     for 0.8 s, up to 2 m off; the backward pass had tracked them right through (005_17 seed
-    605, 91.4 -> 98.3 % of frames all right). Either pass without the flag: no frame."""
+    605, 91.4 -> 98.3 % of frames all right). Either pass without the flag: no frame. (The
+    choice leaves out frames whose forward names descend from the standard pose.)"""
     out = np.zeros(len(markers), bool)
     if fwd.legs_unsure is None or bwd.legs_unsure is None:
         return out
@@ -923,6 +924,9 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     parted = _parted(markers, fwd, bwd, t) if picked_up else np.zeros(len(t), bool)
     markers[np.ix_(parted, [LW, RW])] = bwd.markers[np.ix_(parted, [LW, RW])]
     legs = _unsure_mirrored(markers, fwd, bwd) if picked_up else np.zeros(len(t), bool)
+    # not names from the standard pose with no agreement since: there the backward pass is the
+    # one to doubt (a child-sized climber's knees merged in the standard pose, never confirmed)
+    legs &= ~(lin_f >= STANDARD_POSE_M)
     markers[np.ix_(legs, [LK, RK, LA, RA])] = bwd.markers[np.ix_(legs, [LK, RK, LA, RA])]
     if picked_up:
         _shoulder_kept(markers, fwd.markers, bwd.markers)

@@ -653,13 +653,17 @@ def test_wrists_the_forward_pass_swapped_as_the_hands_parted_take_the_backward_n
         assert np.allclose(markers, a) and not from_b.any()
 
 
-@pytest.mark.parametrize("case", ["forward unsure", "both unsure", "forward sure", "two cameras"])
+@pytest.mark.parametrize("case", ["forward unsure", "both unsure", "forward sure", "two cameras", "standard pose"])
 def test_legs_the_forward_pass_is_unsure_of_take_the_backward_names_it_is_sure_of_the_other_way_round(case):
     """Back from a blackout in a split leap, the forward identification names the legs the
     mirror way round in frames 100-149 and flags them unsure (their side not yet seen); the
     backward pass tracked them right through and is sure. Those frames take the backward legs.
     Not where the backward pass is unsure too, nor where the forward pass is sure, nor with
-    two cameras."""
+    two cameras, nor where the forward names descend from the standard pose's identification
+    and the two passes have not once agreed as a whole since (a child-sized climber's knees
+    merged in the standard pose, so never seen apart: the forward legs, right, stayed unsure,
+    and the backward pass, come into the standard pose mirrored, took them for 1.1 s; 001_14
+    seed 611, 63.3 -> 75.1 % of frames all right)."""
     F = 300
     t = np.arange(F) / FPS
     b = _in_a_row(F)
@@ -670,7 +674,12 @@ def test_legs_the_forward_pass_is_unsure_of_take_the_backward_names_it_is_sure_o
     unsure_f[100:150] = case != "forward sure"
     unsure_b[:] = case == "both unsure"
     none = np.zeros(F, np.int64)
-    markers, from_b = choose(PassResult(a, none, np.zeros(F), legs_unsure=unsure_f),
+    identified = np.full(F, np.nan)
+    if case == "standard pose":
+        identified[0] = 0.1  # the take's first identification, the standard pose's
+        b = b.copy()
+        b[:150, [LW, RW]] += [0.0, 0.0, 0.05]  # the backward wrists apart: no agreement as a whole
+    markers, from_b = choose(PassResult(a, none, np.zeros(F), identified, legs_unsure=unsure_f),
                              PassResult(b, none, np.zeros(F), legs_unsure=unsure_b), t,
                              picked_up=case != "two cameras")
     if case == "forward unsure":
