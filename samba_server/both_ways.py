@@ -595,16 +595,16 @@ def _shoulder_kept(markers: np.ndarray, fwd: np.ndarray, bwd: np.ndarray) -> Non
     """Where the backward names bwd (F, 8, 3) put a wrist on the forward names fwd's (F, 8, 3)
     shoulder and leave that shoulder unnamed, and the chosen names markers (F, 8, 3) took the
     backward pass's view (that wrist there, or the shoulder not named where the forward pass
-    names it), give the shoulder and the wrist their forward names again, in place (unless
-    that names one point twice more often, or the forward pass's other shoulder is on a point
-    the backward pass names as another marker: a climber's every marker named one place on by
-    the forward pass for 0.4 s, and the rule put back two of those wrong names, 001_14 on a
-    fresh body). A shoulder barely moves on the body; a wrist on a
-    shoulder's point is a hand lost at the shoulder: on the saved passes of seeds 3, 601, 602
-    and 606, in the 112 frames where the backward pass named a wrist so, the forward pass's
-    shoulder was right in 108 and the backward wrist in none (005_03 seed 606: the backward
-    pass named the left wrist on the right shoulder for 0.4 s, the choice took it).
-    The other way round is :func:`_wrist_on_shoulder`."""
+    names it), give the shoulder and the wrist their forward names again, in place (unless that
+    names one point twice more often, or the forward pass's other shoulder is on a point the
+    backward pass names as another marker: a climber's every marker named one place on by the
+    forward pass for 0.4 s, and the rule put back two of those wrong names, 001_14 on a fresh
+    body). A shoulder barely moves on the body; a wrist on a shoulder's point is a hand lost at
+    the shoulder: on the saved passes of seeds 3, 601, 602 and 606, in the 112 frames where the
+    backward pass named a wrist so, the forward pass's shoulder was right in 108 and the
+    backward wrist in none (005_03 seed 606: the backward pass named the left wrist on the
+    right shoulder for 0.4 s, the choice took it). The other way round is
+    :func:`_wrist_on_shoulder`."""
     for w, s, hit in _wrist_on_shoulder(bwd, fwd):
         hit &= _within(markers[:, w], bwd[:, w]) | ~_within(markers[:, s], fwd[:, s])
         other = RS if s == LS else LS
@@ -800,11 +800,11 @@ def _guessed_shoulders(markers: np.ndarray, fwd: PassResult, bwd: PassResult, li
     starts at most ``PARTED_S`` after the forward pass left a shoulder unnamed while naming
     other markers (it picked the shoulders up again from stale predictions, a guess; not a
     blackout, after which an identification names them, :func:`choose`'s coin-flip rule), or
-    right after such a run, and the backward names throughout the
-    run descend from a clear identification (lineage >= ``CLEAR_M``, lin_b (F,)). A climber's
-    shoulders, lost under the raised arms for 3 frames, were picked up the mirror way round by
-    the forward pass, the wrists renamed to fit them; the backward pass, identified clearly
-    after the blackout, had them right (001_14 on a fresh body, 4.2 s). t: (F,) s."""
+    right after such a run, and the backward names throughout the run descend from a clear
+    identification (lineage >= ``CLEAR_M``, lin_b (F,)). A climber's shoulders, lost under the
+    raised arms for 3 frames, were picked up the mirror way round by the forward pass, the
+    wrists renamed to fit them; the backward pass, identified clearly after the blackout, had
+    them right (001_14 on a fresh body, 4.2 s). t: (F,) s."""
     out = np.zeros(len(markers), bool)
     sh = [LS, RS]
     swapped = _within(markers[:, sh], bwd.markers[:, [RS, LS]]).all(axis=1)
@@ -868,7 +868,10 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     markers at points apart takes the backward names where they fit the solver clearly better
     (:func:`_fits_better`; not with ``fit`` False, as with two cameras), and the backward
     wrists where the chosen ones are those the other way round right after the hands met
-    (:func:`_parted`; not with ``picked_up`` False). Where the backward pass named a wrist on
+    (:func:`_parted`; not with ``picked_up`` False), and the backward shoulders and wrists (and
+    legs mirrored against them) where the forward pass picked the shoulders up the mirror way
+    round after losing one (:func:`_guessed_shoulders`; not with ``picked_up`` False). Where
+    the backward pass named a wrist on
     the point the forward pass names a shoulder and the chosen names took that view, the two
     keep their forward names (:func:`_shoulder_kept`; not with ``picked_up`` False: measured
     with four cameras only). Returns ((F, 8, 3)
