@@ -127,7 +127,9 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   onto another marker's point, or dropped the name, for a few frames, and the marker's course
   on both sides says which name continued it (4 cameras, 49 takes, seeds 3 and 11: 469 -> 451
   frames not all right; of six other sets of saved passes, two rigs and older labellers,
-  five lost 11-23 frames each and one gained 1).
+  five lost 11-23 frames each and one gained 1). Not a backward name its pass says no view
+  saw apart from its partner (``PassResult.unseparated``: hands together on a sword hilt,
+  5-10 cm apart, where the course cannot tell them; 002_07 on a fresh body, 90.1 -> 93.2 %).
 
 - last, where the two passes name markers at points apart over a run of frames and the
   backward names fit the solver ``FIT_RATIO`` (2) times better than the forward ones, and by
@@ -543,14 +545,17 @@ def _within(a: np.ndarray, b: np.ndarray, tol: float = 0.01) -> np.ndarray:
 
 
 def _on_course(markers: np.ndarray, bwd: np.ndarray, t: np.ndarray, max_s: float = COURSE_S,
-               gate_m: float = COURSE_M) -> tuple[np.ndarray, np.ndarray]:
+               gate_m: float = COURSE_M, unsure: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The chosen names markers (F, 8, 3) with the backward names bwd (F, 8, 3) taken where a
     marker's course says so: in a stretch of at most max_s s where the chosen name of the
     marker leaves the backward one (the forward pass's slip onto another marker's point, or a
     name it dropped) between two frames where both name it at the same point, each frame takes
     the backward name when it lies nearer the straight course between those two points than
     the chosen name (or the chosen name is none) and within gate_m of it, and no other chosen
-    name holds its point. Returns a new (F, 8, 3) array and (F,) bool: frames changed."""
+    name holds its point. Not a backward name its pass says no view saw apart from its partner
+    (unsure (F, 8) bool, ``PassResult.unseparated``: hands together on a hilt, 5-10 cm apart,
+    where the course cannot tell them; a swordplay's left wrist took the right one's point for
+    0.3 s, 002_07 on a fresh body). Returns a new (F, 8, 3) array and (F,) bool: frames changed."""
     out = markers.copy()
     changed = np.zeros(len(t), bool)
     alike = _within(markers, bwd)  # (F, 8)
@@ -565,6 +570,8 @@ def _on_course(markers: np.ndarray, bwd: np.ndarray, t: np.ndarray, max_s: float
                 course = (1.0 - w) * markers[a, m] + w * markers[b + 1, m]
                 d_b = float(np.linalg.norm(bwd[k, m] - course))
                 d_c = float(np.linalg.norm(out[k, m] - course)) if np.isfinite(out[k, m]).all() else np.inf
+                if unsure is not None and unsure[k, m]:
+                    continue
                 if d_b < d_c and d_b <= gate_m and not _within(np.delete(out[k], m, axis=0), bwd[k, m]).any():
                     out[k, m], changed[k] = bwd[k, m], True
     return out, changed
@@ -956,7 +963,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         markers[hit, s] = bwd.markers[hit, s]
         markers[hit & _within(markers[:, w], bwd.markers[:, s]), w] = np.nan
         from_b |= hit
-    markers, course = _on_course(markers, bwd.markers, t)
+    markers, course = _on_course(markers, bwd.markers, t, unsure=bwd.unseparated)
     better = _fits_better(fwd, bwd, nf, nb, both) if fit else np.zeros(len(t), bool)
     markers[better] = bwd.markers[better]
     parted = _parted(markers, fwd, bwd, t) if picked_up else np.zeros(len(t), bool)
