@@ -566,12 +566,12 @@ def _on_course(markers: np.ndarray, bwd: np.ndarray, t: np.ndarray, max_s: float
             if not alike[a, m] or b + 1 >= len(t) or t[b + 1] - t[a] > max_s + 1e-9 or not nb[a + 1:b + 1, m].all():
                 continue
             for k in range(a + 1, b + 1):
+                if unsure is not None and unsure[k, m]:
+                    continue
                 w = (t[k] - t[a]) / (t[b + 1] - t[a])
                 course = (1.0 - w) * markers[a, m] + w * markers[b + 1, m]
                 d_b = float(np.linalg.norm(bwd[k, m] - course))
                 d_c = float(np.linalg.norm(out[k, m] - course)) if np.isfinite(out[k, m]).all() else np.inf
-                if unsure is not None and unsure[k, m]:
-                    continue
                 if d_b < d_c and d_b <= gate_m and not _within(np.delete(out[k], m, axis=0), bwd[k, m]).any():
                     out[k, m], changed[k] = bwd[k, m], True
     return out, changed
