@@ -457,17 +457,24 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
-def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray) -> np.ndarray:
+def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray, lead: np.ndarray | None = None) -> np.ndarray:
     """(F, 8) bool: the frames of each gap in the forward pass's names of a marker (a hand
     hidden from a view, a point the points stage did not make) that the backward pass names
     without a break from an edge of the gap where both passes name the marker at the same
     point: there both followed the same marker, so the backward name across the gap is its
-    continuation. nf, nb: (F, 8) the forward, backward pass names the marker; alike: (F, 8)
-    both name it at the same point."""
+    continuation. A lead frame (the forward pass names nothing, the backward names are
+    taken: the first frames after a blackout) is such an edge for each marker the backward
+    pass names there, not part of a gap: the forward pass, picking the subject up a few
+    markers at a time, leaves the rest unnamed that the backward pass named on from there (a
+    dribbler's right wrist after the blackout, 0.2 s). nf, nb: (F, 8) the forward, backward
+    pass names the marker; alike: (F, 8) both name it at the same point; lead: (F,) bool."""
     F = len(nf)
     out = np.zeros_like(nf)
+    if lead is None:
+        lead = np.zeros(F, bool)
+    alike = alike | (lead[:, None] & nb)
     for m in range(nf.shape[1]):
-        for a, b in _runs(~nf[:, m]):  # the gaps
+        for a, b in _runs(~nf[:, m] & ~lead):  # the gaps
             if a > 0 and alike[a - 1, m]:
                 run = np.flatnonzero(~nb[a:b, m])
                 out[a:a + (run[0] if run.size else b - a), m] = True
@@ -918,7 +925,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     lin_b = _lineage(bwd.identified, nb.any(axis=1), forward=False, renamed=bwd.renamed)
     flip = (lin_f < COIN_M) & (lin_b >= CLEAR_M) & (nb.sum(axis=1) >= np.minimum(nf.sum(axis=1), 4)) \
         & ~same[:, [LS, RS]].all(axis=1)
-    bridged = _bridged(nf, nb, both)
+    bridged = _bridged(nf, nb, both, ~nf.any(axis=1) & nb.any(axis=1) & (doubt_b == 0))
     # (a marker both leave unnamed while they name others is named alike; a blackout is no agreement)
     unnamed_alike = ~nf & ~nb & (nf.any(axis=1) & nb.any(axis=1))[:, None]
     refuted = _refuted(fwd.renamed, nf, nb, both | unnamed_alike, t)

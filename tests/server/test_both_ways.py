@@ -394,6 +394,18 @@ def test_a_gap_in_the_forward_names_is_filled_where_the_backward_pass_names_the_
     other[50, LW] = np.nan
     markers, from_b = choose(PassResult(a, none, np.zeros(F)), PassResult(other, none, np.zeros(F)), t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(40, 50)) and np.allclose(markers[40:50], b[40:50])
+    # after a blackout the forward pass names nothing for two frames (the backward names are
+    # taken there), then picks the subject up without the right wrist, which the backward pass
+    # names on from those frames: its name is taken up to its break (and from there on from
+    # where the two passes name it alike again)
+    a, b = b.copy(), b.copy()
+    a[:30] = b[:30] = np.nan  # the blackout
+    a[30:32] = np.nan  # the forward pass names nothing yet
+    a[32:70, RW] = np.nan
+    b[50, RW] = np.nan  # the backward pass loses the wrist for a frame
+    markers, from_b = choose(PassResult(a, none, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
+    assert np.array_equal(np.flatnonzero(from_b), np.r_[30:50, 51:70])
+    assert np.allclose(markers[30:50], b[30:50]) and not np.isfinite(markers[50, RW]).any()
 
 
 def test_a_forward_rename_both_passes_refute_is_undone_until_they_agree_again():
