@@ -108,6 +108,7 @@ class LabelConfig:
     max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast ...
     turn_slack_deg: float = 45.0  #: ... plus this much (noise of the shoulder points) between labellings
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
+    split_crossed_m: float = 0.03  #: knees or ankles named crossed by this much in the frame before, placed uncrossed either side of their merged point, are reported renamed (:meth:`_split_shared`)
     crossed_memory_s: float = 2.0  #: a pair named crossed this little before the names were lost may be crossed again
     knees_crossed_s: float = 1.0  #: knees crossed (by crossed_m) this long are the legs' names swapped (inf: never)
     legs_sure_m: float = 0.08  #: legs named afresh are unsure (:attr:`Labeller.legs_unsure`) until the knees are named this far apart along the subject's right, the left one on the left (inf: always unsure)
@@ -1489,7 +1490,7 @@ class Labeller:
         foot kicked back behind the other knee) are split along their predictions only for
         ``split_share_s`` after they met on the point, then both stay on it: their tracks, split
         from it frame after frame, keep the direction they met in while the legs turn. Two
-        knees or ankles named crossed in the frame before (by ``crossed_m``) and now placed
+        knees or ankles named crossed in the frame before (by ``split_crossed_m``) and now placed
         uncrossed are renamed (:attr:`LabelQuality.renamed`): each name moves to the
         other's marker, as a swap rule would move it, and the offline choice
         (:mod:`samba_server.both_ways`) doubts the names before, as after any rename (a
@@ -1538,11 +1539,14 @@ class Labeller:
 
     def _crossed_last(self, m: int, n: int, right: np.ndarray) -> bool:
         """Whether the left marker m and the right one n were both named in the frame before,
-        n at least ``crossed_m`` left of m along the subject's right (3,). (Their named places,
-        not the predictions: two knees on a bad 2-view point, split there, had velocities that
-        crossed the predictions of a pair named uncrossed.)"""
+        n at least ``split_crossed_m`` left of m along the subject's right (3,). (Their named
+        places, not the predictions: two knees on a bad 2-view point, split there, had
+        velocities that crossed the predictions of a pair named uncrossed. Less than the swap
+        rules' ``crossed_m``: a dancer's knees, one before the other in a step, named the
+        mirror way round after a blackout and 5-6 cm crossed when they met, were split
+        uncrossed unreported, 0.5 s of wrong legs left unmended.)"""
         seen = self._seen[[m, n]] >= self._t_prev - 1e-6
-        return bool(seen.all() and float((self._pos[n] - self._pos[m]) @ right) < -self.config.crossed_m)
+        return bool(seen.all() and float((self._pos[n] - self._pos[m]) @ right) < -self.config.split_crossed_m)
 
     def _wrists_split(self, out: np.ndarray, pred: np.ndarray, lateral: np.ndarray,
                       tracked: np.ndarray) -> np.ndarray:

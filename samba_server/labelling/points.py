@@ -13,7 +13,8 @@ Per frame (:func:`reconstruct_points`):
    views (views off by more than the triangulator's ``max_error_px`` are dropped when >= 3);
 4. the candidates are accepted greedily, best first (more views, fewer *unexplained* views,
    smaller error; a 2-view candidate more than ``body_radius_m`` from the >= 3-view ones
-   counts two more unexplained views): a blob is used at most once, a merged blob twice (a
+   counts two more unexplained views, one of more views that a view misses there ranks as one
+   view fewer): a blob is used at most once, a merged blob twice (a
    candidate whose blob is taken is kept from its other views when >= 2 are left and ranked
    again by them), and two accepted points are never closer than ``min_separation_m``; an
    accepted point seen by >= 4 views with an error above ``rough_px`` may be a ghost made of
@@ -147,6 +148,16 @@ def _appended(arrays: tuple, X: np.ndarray, err: np.ndarray, n_views: np.ndarray
     K = len(X0)
     return (np.vstack([X0, X]), np.r_[err0, err], np.r_[nv0, n_views], np.r_[miss0, missing],
             np.hstack([blob0, blob]), np.concatenate([uv0, uv], axis=1), np.r_[idx, K + np.arange(len(X))])
+
+
+#: penalty of a >= 3-view candidate far from the body that a view misses: it ranks with one view fewer
+FAR_GHOST = 1000
+
+
+def _rank(n_views: int, penalty: int) -> int:
+    """The acceptance's first key of a candidate (smaller goes first): more views first, a far
+    ghost's penalty (``FAR_GHOST``) counting one view fewer."""
+    return -n_views + int(penalty >= FAR_GHOST)
 
 
 def _skew(v: np.ndarray) -> np.ndarray:
@@ -387,14 +398,20 @@ class PointReconstructor:
         # a 2-view candidate far from the body (a distractor's blob with a marker's, where no
         # other camera looks) ranks as if two more views missed it: it stole a marker's blob
         far = np.zeros(len(X), bool)
+        far_ghost = np.zeros(len(X), bool)
         sure = ok & (n_views >= 3)
         if counts[sure].sum() >= 3:
             # the body's centre: median over the candidates (a point counts once per camera
             # pair that found it, so the points more views see weigh more)
             centre = median_rows(np.repeat(X[sure, :2], counts[sure], axis=0))
-            far = (n_views < 3) & (np.linalg.norm(np.nan_to_num(X[:, :2]) - centre, axis=1) > cfg.body_radius_m)
+            away = np.linalg.norm(np.nan_to_num(X[:, :2]) - centre, axis=1) > cfg.body_radius_m
+            far = (n_views < 3) & away
+            # ... and one of more views that a view misses ranks as one view fewer: two
+            # distractors' blobs and a knee's made a 3-view ghost 3 m from the body (0.5 px) that
+            # went before the knee, left with 2 views by a hidden marker's point (003_01)
+            far_ghost = (n_views >= 3) & (missing > 0) & away
         # greedy acceptance, best first
-        penalty = missing + 2 * far
+        penalty = missing + 2 * far + FAR_GHOST * far_ghost
         fresh = (X.copy(), err.copy(), n_views.copy(), blob.copy())  # before acceptance reduces candidates
         keep, capl = self._accept(penalty, views, ok, X, err, n_views, blob, uv)
         keep, capl, X, err, n_views, blob, uv, missing = self._unghost(keep, capl, penalty, views, ok,
@@ -815,10 +832,10 @@ class PointReconstructor:
         cfg, C = self.config, self.C
         capl = [v.capacity.tolist() for v in views]  # markers each blob may still give
         rows = blob.T.tolist()  # plain lists: this loop visits every candidate
-        # best first: more views, then fewer unexplained (penalty), then smaller error
+        # best first: more views (a far ghost one fewer), then fewer unexplained (penalty), then smaller error
         idx = np.flatnonzero(ok)
-        heap = [(-n, p, e, k) for n, p, e, k in zip(n_views[idx].tolist(), penalty[idx].tolist(),
-                                                    np.nan_to_num(err[idx], nan=1e9).tolist(), idx.tolist())]
+        heap = [(_rank(n, p), p, e, k) for n, p, e, k in zip(n_views[idx].tolist(), penalty[idx].tolist(),
+                                                             np.nan_to_num(err[idx], nan=1e9).tolist(), idx.tolist())]
         heapq.heapify(heap)
         keep: list[int] = []
         kept: list[tuple[float, float, float]] = []  # their positions (m): accepted points are not moved again
@@ -834,7 +851,7 @@ class PointReconstructor:
                 if len(cs) - len(taken) < 2 or not self._reduce(k, taken, X, err, n_views, blob, uv):
                     continue
                 rows[k] = blob[:, k].tolist()
-                heapq.heappush(heap, (-int(n_views[k]), int(penalty[k]), float(err[k]), k))
+                heapq.heappush(heap, (_rank(int(n_views[k]), int(penalty[k])), int(penalty[k]), float(err[k]), k))
                 continue
             x, y, z = X[k].tolist()
             if kept and _too_close(kept, x, y, z, cfg.min_separation_m):
