@@ -404,6 +404,16 @@ def _apart_before(renamed: np.ndarray, same: np.ndarray, t: np.ndarray, own: np.
     return out
 
 
+def _renamed_soon(renamed: np.ndarray, t: np.ndarray, within_s: float) -> np.ndarray:
+    """(F,) int bits: per frame k the markers renamed (renamed (F,) int bits) in some frame j
+    with t[k] <= t[j] <= t[k] + within_s: for the backward pass, the renames its names at k
+    descend from, made a few frames before in its travel. t: (F,) s."""
+    out = renamed.copy()
+    for j in np.flatnonzero(renamed):
+        out[np.searchsorted(t, t[j] - within_s - 1e-9):j] |= renamed[j]
+    return out
+
+
 def _lineage(identified: np.ndarray | None, named: np.ndarray, forward: bool,
              settled: np.ndarray | None = None, renamed: np.ndarray | None = None) -> np.ndarray:
     """(F,) the margin (m) of the identification each frame's names descend from in the pass's
@@ -895,14 +905,18 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     both = _within(fwd.markers, bwd.markers)  # (F, 8) named at the same point by both passes
     same = both | (~nf & ~nb)  # (F, 8) the two passes name marker m alike
     # a rename is confirmed for the markers it renamed that the backward pass, tracking them
-    # there (not renaming them itself), names at the same points (a marker the rename left
+    # there (not renaming them itself, nor within NEXT_S after: its names there then descend
+    # from its own rename of the same frames, both passes' identifications alike and as
+    # likely wrong alike; a dancer's right knee and ankle, renamed by both onto the ankle's
+    # point 2 frames apart, doubted 0.5 s of right forward legs, 005_05 on a fresh body),
+    # names at the same points (a marker the rename left
     # unnamed: where the forward pass names it next, within NEXT_S); when it is confirmed for
     # all of them and the two namings agree as a whole (>= 4 markers named by both, none named
     # otherwise), for every marker of the halves of the body it renamed (the legs; the shoulders
     # and wrists)
     near = _within(fwd.markers, bwd.markers, ALIKE_M)  # one point (or one merged point split by each pass)
     alike = marker_bits(near | _renamed_to_none(fwd.renamed, nf, nb, both, t))
-    agree = alike & ~bwd.renamed.astype(np.int64)
+    agree = alike & ~_renamed_soon(bwd.renamed.astype(np.int64), t, NEXT_S)
     renamed = fwd.renamed.astype(np.int64)
     whole = ((nf & nb).sum(axis=1) >= 4) & (near | ~(nf & nb)).all(axis=1) & ((renamed & ~agree) == 0)
     confirmed = np.where(whole & (renamed != 0), _halves(renamed), renamed & agree)

@@ -242,7 +242,8 @@ def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
     the second before the forward pass renamed its markers at 200 to what the backward pass
     names (there the backward one is taken, for the markers renamed), unless the backward pass
     renamed its own in the second after to names the forward pass confirms; a rename the backward pass does not confirm (names
-    otherwise, or renamed itself at that frame) changes nothing; a rename of some markers where
+    otherwise, or renamed itself at that frame or within ``NEXT_S`` after it: its names there
+    descend from its own rename of the same frames) changes nothing; a rename of some markers where
     the two namings agree as a whole speaks for their half of the body (the legs; the shoulders
     and wrists), not the other half; a frame the forward pass names nothing in takes the
     backward names."""
@@ -269,6 +270,14 @@ def test_only_a_naming_its_own_pass_found_wrong_is_replaced():
     _m, from_b = choose(fwd, bwd, t)
     assert not from_b.any()
     ren_b[200] = 0
+    ren_b[202] = 0xFF  # ... nor 2 frames later (its names at 200 descend from that rename) ...
+    _m, from_b = choose(fwd, bwd, t)
+    assert not from_b.any()
+    ren_b[202] = 0
+    ren_b[200 + int(NEXT_S * FPS) + 1] = 0xFF  # ... but one more than NEXT_S later they are
+    _m, from_b = choose(fwd, bwd, t)
+    assert np.array_equal(np.flatnonzero(from_b), np.arange(140, 200))
+    ren_b[:] = 0
     b[200:] += 0.5  # the backward pass names otherwise after the rename too: not confirmed
     _m, from_b = choose(fwd, bwd, t)
     assert not from_b.any()
