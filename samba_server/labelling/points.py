@@ -399,6 +399,7 @@ class PointReconstructor:
         # other camera looks) ranks as if two more views missed it: it stole a marker's blob
         far = np.zeros(len(X), bool)
         far_ghost = np.zeros(len(X), bool)
+        away = np.zeros(len(X), bool)
         sure = ok & (n_views >= 3)
         if counts[sure].sum() >= 3:
             # the body's centre: median over the candidates (a point counts once per camera
@@ -416,6 +417,8 @@ class PointReconstructor:
         keep, capl = self._accept(penalty, views, ok, X, err, n_views, blob, uv)
         keep, capl, X, err, n_views, blob, uv, missing = self._unghost(keep, capl, penalty, views, ok,
                                                                        (X, err, n_views, blob), fresh, uv, missing)
+        if 2 <= len(keep) < cfg.max_points:
+            keep = self._reclaim(keep, capl, views, ok & ~away[:len(ok)], fresh, (X, err, n_views, blob), uv)
         cap = [np.array(c, np.int64) for c in capl]
         if not keep:
             return Points3D.empty(C)
@@ -863,6 +866,111 @@ class PointReconstructor:
             if len(keep) >= cfg.max_points:
                 break
         return keep, capl
+
+    def _reclaim(self, keep: list[int], capl: list[list[int]], views: list[ViewBlobs], ok: np.ndarray,
+                 fresh: tuple, accepted: tuple, uv: np.ndarray) -> list[int]:
+        """Candidates left out because an accepted point took one of their blobs, given that blob
+        back where they lie in front of that point in its view: a marker hidden behind another
+        projects onto the other's blob, and its point (more views go first) took it, leaving the
+        one in front with a single view of its own (the left knee's point took the right knee's
+        blob in the one view that hid it behind the right knee, 8 cm off, and the right knee,
+        seen apart by two cameras, had no point). A candidate (``fresh``: X, err, n_views, blob
+        before the acceptance) is kept when, with the single-marker blobs it claims from points
+        of >= 3 views at least ``behind_m`` farther from that camera, it has >= 2 views that
+        triangulate within ``rough_px`` (one of them its own, still free), no other view misses
+        it (:meth:`_unexplained`) and it lies ``min_separation_m`` from the accepted points; the
+        points that gave a blob up are triangulated again without it. Up to ``max_points``
+        points; ``ok`` (K,) leaves out the candidates far from the body. ``accepted``: X, err,
+        n_views, blob after the acceptance (updated in place); capl in place; uv (C, K, 2) px.
+        Returns keep, with the reclaimed candidates appended."""
+        cfg = self.config
+        X, err, n_views, blob = accepted
+        fX, ferr, _fn, fblob = fresh
+        K0 = len(fX)
+        kept = set(keep)
+        owner = {(c, int(blob[c, p])): p for p in keep for c in range(self.C) if blob[c, p] >= 0 and n_views[p] >= 3}
+        rest = []
+        for q in np.flatnonzero(ok[:K0] & ((fblob >= 0).sum(axis=0) >= 2)).tolist():
+            cams = np.flatnonzero(fblob[:, q] >= 0).tolist()
+            if q in kept or not any(capl[c][fblob[c, q]] > 0 for c in cams) or \
+                    not any((c, int(fblob[c, q])) in owner for c in cams):
+                continue
+            rest.append(q)
+        if not rest:
+            return keep
+        _pr, depth_q = self.tri.project(fX[rest])  # (C, R) m
+        depth = {}  # accepted point -> (C,) m
+        for i in np.argsort(ferr[rest]).tolist():
+            q = rest[i]
+            cams = np.flatnonzero(fblob[:, q] >= 0).tolist()
+            own = [c for c in cams if capl[c][fblob[c, q]] > 0]
+            claims: list[tuple[int, int]] = []
+            for c in cams:
+                p = owner.get((c, int(fblob[c, q])))
+                if c in own or p is None or views[c].capacity[fblob[c, q]] != 1 or any(p == p2 for _c, p2 in claims):
+                    continue
+                if p not in depth:
+                    depth[p] = self.tri.project(X[p:p + 1])[1][:, 0]
+                if depth_q[c, i] < depth[p][c] - cfg.behind_m:
+                    claims.append((c, p))
+            if not own or not claims:
+                continue
+            use = own + [c for c, _p in claims]
+            res = self._triangulate_views(uv, q, use)
+            if res.n_views[0] < len(use) or res.error[0] > cfg.rough_px or not self.plausible(res.points)[0]:
+                continue
+            bq = np.where(np.isin(np.arange(self.C), use), fblob[:, q], -1)
+            if self._unexplained(res.points[0], bq, views, [k for k in keep if n_views[k] >= 3], X, blob):
+                continue
+            given = [(c, p, self._triangulate_views(uv, p, [v for v in np.flatnonzero(blob[:, p] >= 0) if v != c]))
+                     for c, p in claims]
+            if any(r.n_views[0] < 2 or not self.plausible(r.points)[0] for _c, _p, r in given):
+                continue
+            moved = {p for _c, p in claims}
+            others = [X[k] for k in keep if k not in moved] + [r.points[0] for _c, _p, r in given]
+            if np.min(np.linalg.norm(np.array(others) - res.points[0], axis=1)) < cfg.min_separation_m:
+                continue
+            for c, p, r in given:
+                X[p], err[p], n_views[p] = r.points[0], r.error[0], r.n_views[0]
+                blob[c, p] = -1
+                blob[~r.used[:, 0], p] = -1
+                depth.pop(p, None)
+                if n_views[p] < 3:  # no longer sure: gives no more blobs
+                    for key in [key for key, v in owner.items() if v == p]:
+                        del owner[key]
+            X[q], err[q], n_views[q], blob[:, q] = res.points[0], res.error[0], res.n_views[0], bq
+            for c in own:
+                capl[c][fblob[c, q]] -= 1
+            for c, _p in claims:
+                owner.pop((c, int(fblob[c, q])), None)
+            keep = keep + [q]
+            if len(keep) >= cfg.max_points:
+                break
+        return keep
+
+    def _unexplained(self, x: np.ndarray, bq: np.ndarray, views: list[ViewBlobs], sure: list[int],
+                     X: np.ndarray, blob: np.ndarray) -> bool:
+        """Whether a view misses point x (3,) m whose blobs are bq (C,) (-1: none): x falls inside
+        its image with no blob within ``support_px`` (a merged blob's extra tolerance added) and
+        not behind one of the sure points (indices into X (K, 3), blob (C, K)): on its blob
+        (within the blob's radius plus ``support_px``) and at least ``behind_m`` nearer."""
+        cfg = self.config
+        proj, depth = self.tri.project(x[None])
+        inside = self._inside(proj, depth)[:, 0]
+        for c, v in enumerate(views):
+            if not inside[c] or bq[c] >= 0:
+                continue
+            if len(v) and (np.linalg.norm(v.uv - proj[c, 0], axis=1) - self._merged_extra(v)).min() <= cfg.support_px:
+                continue
+            front = [k for k in sure if blob[c, k] >= 0]
+            if front:
+                _pf, df = self.tri.project(X[front])
+                b = blob[c, front]
+                near = np.linalg.norm(v.uv[b] - proj[c, 0], axis=1) <= v.radius[b] + cfg.support_px
+                if (near & (df[c] < depth[c, 0] - cfg.behind_m)).any():
+                    continue
+            return True
+        return False
 
     def _unghost(self, keep: list[int], capl: list[list[int]], penalty: np.ndarray, views: list[ViewBlobs],
                  ok: np.ndarray, accepted: tuple, fresh: tuple, uv: np.ndarray, missing: np.ndarray) -> tuple:

@@ -680,19 +680,21 @@ def test_knees_a_pass_does_not_doubt_come_with_the_ankles_taken_from_the_other_w
     assert np.allclose(markers, b)
 
 
-@pytest.mark.parametrize("case", ["parted", "they meet again", "two cameras"])
+@pytest.mark.parametrize("case", ["parted", "parted along a hilt", "they meet again", "two cameras"])
 def test_wrists_the_forward_pass_swapped_as_the_hands_parted_take_the_backward_names(case):
     """Hands together 5 cm apart in frames 100-110 (a clap, a hilt), parting to 30 cm by frame
-    130. Which hand is which as they part no view tells: the forward pass, coming out of the
-    meeting, names the wrists the other way round from frame 111 to 149; the backward pass,
-    which reaches those frames before it goes through the meeting, names them right. Those
-    frames take the backward wrists. Not where the hands meet again right after the run (the
-    backward pass may then be the one coming out of a meeting), nor with two cameras."""
+    130 (14 cm, both hands on a sword's hilt). Which hand is which as they part no view tells:
+    the forward pass, coming out of the meeting, names the wrists the other way round from
+    frame 111 to 149; the backward pass, which reaches those frames before it goes through the
+    meeting, names them right. Those frames take the backward wrists. Not where the hands
+    meet again right after the run (the backward pass may then be the one coming out of a
+    meeting), nor with two cameras."""
     F = 300
     t = np.arange(F) / FPS
-    sep = np.full(F, 0.30)
+    apart = 0.14 if case == "parted along a hilt" else 0.30
+    sep = np.full(F, apart)
     sep[100:111] = 0.05
-    sep[111:130] = np.linspace(0.05, 0.30, 19)
+    sep[111:130] = np.linspace(0.05, apart, 19)
     if case == "they meet again":
         sep[150:160] = 0.05
     b = _in_a_row(F)  # the other markers 1 m apart
@@ -703,7 +705,7 @@ def test_wrists_the_forward_pass_swapped_as_the_hands_parted_take_the_backward_n
     none = np.zeros(F, np.int64)
     markers, from_b = choose(PassResult(a, none, np.zeros(F)), PassResult(b, none, np.zeros(F)), t,
                              picked_up=case != "two cameras")
-    if case == "parted":
+    if case.startswith("parted"):
         assert np.allclose(markers, b) and np.array_equal(np.flatnonzero(from_b), np.arange(111, 150))
     else:
         assert np.allclose(markers, a) and not from_b.any()
