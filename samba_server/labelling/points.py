@@ -876,10 +876,13 @@ class PointReconstructor:
         blob in the one view that hid it behind the right knee, 8 cm off, and the right knee,
         seen apart by two cameras, had no point). A candidate (``fresh``: X, err, n_views, blob
         before the acceptance) is kept when, with the single-marker blobs it claims from points
-        of >= 3 views at least ``behind_m`` farther from that camera, it has >= 2 views that
-        triangulate within ``rough_px`` (one of them its own, still free), no other view misses
-        it (:meth:`_unexplained`) and it lies ``min_separation_m`` from the accepted points; the
-        points that gave a blob up are triangulated again without it. Up to ``max_points``
+        of >= 3 views at least ``behind_m`` farther from that camera (as it and they are
+        triangulated), it has >= 2 views that triangulate within ``rough_px`` (one of them its
+        own, still free), no other view misses it (:meth:`_unexplained`) and it lies
+        ``min_separation_m`` from the accepted points, those it claims from included; the
+        points that gave a blob up are triangulated again without it, within ``rough_px`` (a
+        3-view ghost beside a shoulder whose blob the shoulder's candidate claimed, left with two
+        views, was named a wrist: a child-sized swordplay lost a third of its frames). Up to ``max_points``
         points; ``ok`` (K,) leaves out the candidates far from the body. ``accepted``: X, err,
         n_views, blob after the acceptance (updated in place); capl in place; uv (C, K, 2) px.
         Returns keep, with the reclaimed candidates appended."""
@@ -919,12 +922,20 @@ class PointReconstructor:
             res = self._triangulate_views(uv, q, use)
             if res.n_views[0] < len(use) or res.error[0] > cfg.rough_px or not self.plausible(res.points)[0]:
                 continue
+            # in front of each point it claims from, as triangulated (not the same marker: a
+            # shoulder's candidate on a subset of its own point's views took a blob from it, and
+            # the point, left with the rest, moved 15 cm onto a ghost)
+            d_res = self.tri.project(res.points)[1][:, 0]
+            if any(d_res[c] >= depth[p][c] - cfg.behind_m or np.linalg.norm(res.points[0] - X[p]) < cfg.min_separation_m
+                   for c, p in claims):
+                continue
             bq = np.where(np.isin(np.arange(self.C), use), fblob[:, q], -1)
             if self._unexplained(res.points[0], bq, views, [k for k in keep if n_views[k] >= 3], X, blob):
                 continue
             given = [(c, p, self._triangulate_views(uv, p, [v for v in np.flatnonzero(blob[:, p] >= 0) if v != c]))
                      for c, p in claims]
-            if any(r.n_views[0] < 2 or not self.plausible(r.points)[0] for _c, _p, r in given):
+            if any(r.n_views[0] < 2 or r.error[0] > cfg.rough_px or not self.plausible(r.points)[0]
+                   for _c, _p, r in given):
                 continue
             moved = {p for _c, p in claims}
             others = [X[k] for k in keep if k not in moved] + [r.points[0] for _c, _p, r in given]
