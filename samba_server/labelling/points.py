@@ -880,9 +880,10 @@ class PointReconstructor:
         triangulated), it has >= 2 views that triangulate within ``rough_px`` (one of them its
         own, still free), no other view misses it (:meth:`_unexplained`) and it lies
         ``min_separation_m`` from the accepted points, those it claims from included; the
-        points that gave a blob up are triangulated again without it, within ``rough_px`` (a
-        3-view ghost beside a shoulder whose blob the shoulder's candidate claimed, left with two
-        views, was named a wrist: a child-sized swordplay lost a third of its frames). Up to ``max_points``
+        points that gave a blob up are triangulated again without it, within ``rough_px``
+        (without the last two guards a child-sized swordplay lost a third of its frames: a
+        ghost beside a shoulder, left with two views by the shoulder's claim, was named a
+        wrist). Up to ``max_points``
         points; ``ok`` (K,) leaves out the candidates far from the body. ``accepted``: X, err,
         n_views, blob after the acceptance (updated in place); capl in place; uv (C, K, 2) px.
         Returns keep, with the reclaimed candidates appended."""
@@ -922,9 +923,8 @@ class PointReconstructor:
             res = self._triangulate_views(uv, q, use)
             if res.n_views[0] < len(use) or res.error[0] > cfg.rough_px or not self.plausible(res.points)[0]:
                 continue
-            # in front of each point it claims from, as triangulated (not the same marker: a
-            # shoulder's candidate on a subset of its own point's views took a blob from it, and
-            # the point, left with the rest, moved 15 cm onto a ghost)
+            # in front of each point it claims from and apart from it, as triangulated from the
+            # views it keeps (the candidate's first triangulation may lie elsewhere)
             d_res = self.tri.project(res.points)[1][:, 0]
             if any(d_res[c] >= depth[p][c] - cfg.behind_m or np.linalg.norm(res.points[0] - X[p]) < cfg.min_separation_m
                    for c, p in claims):
