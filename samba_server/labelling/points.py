@@ -418,7 +418,9 @@ class PointReconstructor:
         keep, capl, X, err, n_views, blob, uv, missing = self._unghost(keep, capl, penalty, views, ok,
                                                                        (X, err, n_views, blob), fresh, uv, missing)
         if 2 <= len(keep) < cfg.max_points:
-            keep = self._reclaim(keep, capl, views, ok & ~away[:len(ok)], fresh, (X, err, n_views, blob), uv)
+            # (a candidate two views miss is a ghost: most of those clutter makes near the body)
+            keep = self._reclaim(keep, capl, views, ok & ~away[:len(ok)] & (missing[:len(ok)] <= 1), fresh,
+                                 (X, err, n_views, blob), uv)
         cap = [np.array(c, np.int64) for c in capl]
         if not keep:
             return Points3D.empty(C)
@@ -884,26 +886,34 @@ class PointReconstructor:
         (without the last two guards a child-sized swordplay lost a third of its frames: a
         ghost beside a shoulder, left with two views by the shoulder's claim, was named a
         wrist). Up to ``max_points``
-        points; ``ok`` (K,) leaves out the candidates far from the body. ``accepted``: X, err,
+        points; ``ok`` (K,) leaves out the candidates far from the body or that two views miss. ``accepted``: X, err,
         n_views, blob after the acceptance (updated in place); capl in place; uv (C, K, 2) px.
         Returns keep, with the reclaimed candidates appended."""
         cfg = self.config
         X, err, n_views, blob = accepted
         fX, ferr, _fn, fblob = fresh
         K0 = len(fX)
-        kept = set(keep)
         owner = {(c, int(blob[c, p])): p for p in keep for c in range(self.C) if blob[c, p] >= 0 and n_views[p] >= 3}
-        rest = []
-        for q in np.flatnonzero(ok[:K0] & ((fblob >= 0).sum(axis=0) >= 2)).tolist():
-            cams = np.flatnonzero(fblob[:, q] >= 0).tolist()
-            if q in kept or not any(capl[c][fblob[c, q]] > 0 for c in cams) or \
-                    not any((c, int(fblob[c, q])) in owner for c in cams):
+        # the candidates with a free blob of their own and one a sure point took
+        has = fblob >= 0  # (C, K0)
+        free = np.zeros_like(has)
+        taken = np.zeros_like(has)
+        for c in range(self.C):
+            if not len(capl[c]):
                 continue
-            rest.append(q)
+            b = np.where(has[c], fblob[c], 0)
+            free[c] = has[c] & (np.asarray(capl[c])[b] > 0)
+            mine = np.zeros(len(capl[c]), bool)
+            mine[[bb for cc, bb in owner if cc == c]] = True
+            taken[c] = has[c] & mine[b]
+        pick = ok[:K0] & (has.sum(axis=0) >= 2) & free.any(axis=0) & taken.any(axis=0)
+        pick[[k for k in keep if k < K0]] = False
+        rest = np.flatnonzero(pick).tolist()
         if not rest:
             return keep
         _pr, depth_q = self.tri.project(fX[rest])  # (C, R) m
         depth = {}  # accepted point -> (C,) m
+        front: tuple[list[int], np.ndarray] | None = None
         for i in np.argsort(ferr[rest]).tolist():
             q = rest[i]
             cams = np.flatnonzero(fblob[:, q] >= 0).tolist()
@@ -930,7 +940,10 @@ class PointReconstructor:
                    for c, p in claims):
                 continue
             bq = np.where(np.isin(np.arange(self.C), use), fblob[:, q], -1)
-            if self._unexplained(res.points[0], bq, views, [k for k in keep if n_views[k] >= 3], X, blob):
+            if front is None:  # the sure points and their depths (C, S) m, until one moves
+                sure = [k for k in keep if n_views[k] >= 3]
+                front = (sure, self.tri.project(X[sure])[1] if sure else np.zeros((self.C, 0)))
+            if self._unexplained(res.points[0], bq, views, front[0], front[1], blob):
                 continue
             given = [(c, p, self._triangulate_views(uv, p, [v for v in np.flatnonzero(blob[:, p] >= 0) if v != c]))
                      for c, p in claims]
@@ -950,6 +963,7 @@ class PointReconstructor:
                     for key in [key for key, v in owner.items() if v == p]:
                         del owner[key]
             X[q], err[q], n_views[q], blob[:, q] = res.points[0], res.error[0], res.n_views[0], bq
+            front = None
             for c in own:
                 capl[c][fblob[c, q]] -= 1
             for c, _p in claims:
@@ -960,11 +974,12 @@ class PointReconstructor:
         return keep
 
     def _unexplained(self, x: np.ndarray, bq: np.ndarray, views: list[ViewBlobs], sure: list[int],
-                     X: np.ndarray, blob: np.ndarray) -> bool:
+                     depth_sure: np.ndarray, blob: np.ndarray) -> bool:
         """Whether a view misses point x (3,) m whose blobs are bq (C,) (-1: none): x falls inside
         its image with no blob within ``support_px`` (a merged blob's extra tolerance added) and
-        not behind one of the sure points (indices into X (K, 3), blob (C, K)): on its blob
-        (within the blob's radius plus ``support_px``) and at least ``behind_m`` nearer."""
+        not behind one of the sure points (indices into blob (C, K); depth_sure (C, len(sure))
+        m, theirs in each view): on its blob (within the blob's radius plus ``support_px``) and
+        at least ``behind_m`` nearer."""
         cfg = self.config
         proj, depth = self.tri.project(x[None])
         inside = self._inside(proj, depth)[:, 0]
@@ -973,12 +988,11 @@ class PointReconstructor:
                 continue
             if len(v) and (np.linalg.norm(v.uv - proj[c, 0], axis=1) - self._merged_extra(v)).min() <= cfg.support_px:
                 continue
-            front = [k for k in sure if blob[c, k] >= 0]
-            if front:
-                _pf, df = self.tri.project(X[front])
-                b = blob[c, front]
+            seen = [i for i, k in enumerate(sure) if blob[c, k] >= 0]
+            if seen:
+                b = blob[c, [sure[i] for i in seen]]
                 near = np.linalg.norm(v.uv[b] - proj[c, 0], axis=1) <= v.radius[b] + cfg.support_px
-                if (near & (df[c] < depth[c, 0] - cfg.behind_m)).any():
+                if (near & (depth_sure[c, seen] < depth[c, 0] - cfg.behind_m)).any():
                     continue
             return True
         return False
