@@ -874,21 +874,21 @@ class PointReconstructor:
         """Candidates left out because an accepted point took one of their blobs, given that blob
         back where they lie in front of that point in its view: a marker hidden behind another
         projects onto the other's blob, and its point (more views go first) took it, leaving the
-        one in front with a single view of its own (the left knee's point took the right knee's
-        blob in the one view that hid it behind the right knee, 8 cm off, and the right knee,
-        seen apart by two cameras, had no point). A candidate (``fresh``: X, err, n_views, blob
-        before the acceptance) is kept when, with the single-marker blobs it claims from points
-        of >= 3 views at least ``behind_m`` farther from that camera (as it and they are
+        one in front with a single view of its own (a dancer's left knee's point took the right
+        knee's blob in the one view that hid it behind the right knee, 2.3 cm off, and the right
+        knee, seen apart by two cameras, had no point). A candidate (``fresh``: X, err, n_views,
+        blob before the acceptance) is kept when, with the single-marker blobs it claims from
+        points of >= 3 views at least ``behind_m`` farther from that camera (as it and they are
         triangulated), it has >= 2 views that triangulate within ``rough_px`` (one of them its
         own, still free), no other view misses it (:meth:`_unexplained`) and it lies
         ``min_separation_m`` from the accepted points, those it claims from included; the
         points that gave a blob up are triangulated again without it, within ``rough_px``
         (without the last two guards a child-sized swordplay lost a third of its frames: a
         ghost beside a shoulder, left with two views by the shoulder's claim, was named a
-        wrist). Up to ``max_points``
-        points; ``ok`` (K,) leaves out the candidates far from the body or that two views miss. ``accepted``: X, err,
-        n_views, blob after the acceptance (updated in place); capl in place; uv (C, K, 2) px.
-        Returns keep, with the reclaimed candidates appended."""
+        wrist). Up to ``max_points`` points; ``ok`` (K,) leaves out the candidates far from the
+        body or that two views miss. ``accepted``: X, err, n_views, blob after the acceptance
+        (updated in place); capl in place; uv (C, K, 2) px. Returns keep, with the reclaimed
+        candidates appended."""
         cfg = self.config
         X, err, n_views, blob = accepted
         fX, ferr, _fn, fblob = fresh
