@@ -469,7 +469,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
-def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray, lead: np.ndarray | None = None) -> np.ndarray:
+def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray, lead: np.ndarray) -> np.ndarray:
     """(F, 8) bool: the frames of each gap in the forward pass's names of a marker (a hand
     hidden from a view, a point the points stage did not make) that the backward pass names
     without a break from an edge of the gap where both passes name the marker at the same
@@ -482,8 +482,6 @@ def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray, lead: np.ndarray
     pass names the marker; alike: (F, 8) both name it at the same point; lead: (F,) bool."""
     F = len(nf)
     out = np.zeros_like(nf)
-    if lead is None:
-        lead = np.zeros(F, bool)
     alike = alike | (lead[:, None] & nb)
     for m in range(nf.shape[1]):
         for a, b in _runs(~nf[:, m] & ~lead):  # the gaps

@@ -419,7 +419,7 @@ class PointReconstructor:
                                                                        (X, err, n_views, blob), fresh, uv, missing)
         if 2 <= len(keep) < cfg.max_points:
             # (a candidate two views miss is a ghost: most of those clutter makes near the body)
-            keep = self._reclaim(keep, capl, views, ok & ~away[:len(ok)] & (missing[:len(ok)] <= 1), fresh,
+            keep = self._reclaim(keep, capl, views, ok & ~away & (missing[:len(ok)] <= 1), fresh,
                                  (X, err, n_views, blob), uv)
         cap = [np.array(c, np.int64) for c in capl]
         if not keep:
@@ -912,8 +912,14 @@ class PointReconstructor:
         if not rest:
             return keep
         _pr, depth_q = self.tri.project(fX[rest])  # (C, R) m
-        depth = {}  # accepted point -> (C,) m
-        front: tuple[list[int], np.ndarray] | None = None
+        seen: tuple[dict[int, int], np.ndarray] | None = None  # accepted point -> column, depths (C, P) m
+
+        def depth_of(p: int) -> np.ndarray:  # (C,) m, the accepted point p's depth in each view
+            nonlocal seen
+            if seen is None:  # until a point moves
+                seen = ({k: j for j, k in enumerate(keep)}, self.tri.project(X[keep])[1])
+            return seen[1][:, seen[0][p]]
+
         for i in np.argsort(ferr[rest]).tolist():
             q = rest[i]
             cams = np.flatnonzero(fblob[:, q] >= 0).tolist()
@@ -923,9 +929,7 @@ class PointReconstructor:
                 p = owner.get((c, int(fblob[c, q])))
                 if c in own or p is None or views[c].capacity[fblob[c, q]] != 1 or any(p == p2 for _c, p2 in claims):
                     continue
-                if p not in depth:
-                    depth[p] = self.tri.project(X[p:p + 1])[1][:, 0]
-                if depth_q[c, i] < depth[p][c] - cfg.behind_m:
+                if depth_q[c, i] < depth_of(p)[c] - cfg.behind_m:
                     claims.append((c, p))
             if not own or not claims:
                 continue
@@ -936,14 +940,13 @@ class PointReconstructor:
             # in front of each point it claims from and apart from it, as triangulated from the
             # views it keeps (the candidate's first triangulation may lie elsewhere)
             d_res = self.tri.project(res.points)[1][:, 0]
-            if any(d_res[c] >= depth[p][c] - cfg.behind_m or np.linalg.norm(res.points[0] - X[p]) < cfg.min_separation_m
+            if any(d_res[c] >= depth_of(p)[c] - cfg.behind_m or np.linalg.norm(res.points[0] - X[p]) < cfg.min_separation_m
                    for c, p in claims):
                 continue
             bq = np.where(np.isin(np.arange(self.C), use), fblob[:, q], -1)
-            if front is None:  # the sure points and their depths (C, S) m, until one moves
-                sure = [k for k in keep if n_views[k] >= 3]
-                front = (sure, self.tri.project(X[sure])[1] if sure else np.zeros((self.C, 0)))
-            if self._unexplained(res.points[0], bq, views, front[0], front[1], blob):
+            sure = [k for k in keep if n_views[k] >= 3]
+            if self._unexplained(res.points[0], bq, views, sure,
+                                 np.stack([depth_of(k) for k in sure], axis=1) if sure else np.zeros((self.C, 0)), blob):
                 continue
             given = [(c, p, self._triangulate_views(uv, p, [v for v in np.flatnonzero(blob[:, p] >= 0) if v != c]))
                      for c, p in claims]
@@ -958,12 +961,11 @@ class PointReconstructor:
                 X[p], err[p], n_views[p] = r.points[0], r.error[0], r.n_views[0]
                 blob[c, p] = -1
                 blob[~r.used[:, 0], p] = -1
-                depth.pop(p, None)
                 if n_views[p] < 3:  # no longer sure: gives no more blobs
                     for key in [key for key, v in owner.items() if v == p]:
                         del owner[key]
             X[q], err[q], n_views[q], blob[:, q] = res.points[0], res.error[0], res.n_views[0], bq
-            front = None
+            seen = None
             for c in own:
                 capl[c][fblob[c, q]] -= 1
             for c, _p in claims:
