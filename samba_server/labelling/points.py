@@ -385,6 +385,7 @@ class PointReconstructor:
             res = self.tri.triangulate(uv[:, again])
             X[again], err[again], used[:, again] = res.points, res.error, res.used
         used &= blob >= 0
+        self._on_ends(X, err, used, blob, uv, pad_cap, views)
         blob = np.where(used, blob, -1)
         n_views = used.sum(axis=0)
         ok = (n_views >= 2) & self.plausible(X)
@@ -463,6 +464,46 @@ class PointReconstructor:
         behind = self._behind(views, proj, depth, n_views[idx], blob, missing)
         return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing, blob,
                         votes, n_merged > 0, merged_all, n_merged, mirrored, behind)
+
+    def _on_ends(self, X: np.ndarray, err: np.ndarray, used: np.ndarray, blob: np.ndarray, uv: np.ndarray,
+                 cap: np.ndarray, views: list[ViewBlobs]) -> None:
+        """A candidate whose triangulation dropped a single marker's blob while it kept a merged
+        blob: the merged blob's centroid lies between its two markers, and two such centroids
+        meet there, between the markers, better than the marker's own blob does (two wrists
+        merged in two views, apart in a third: the centroids met 9 cm from each wrist, the
+        left wrist's own blob was dropped, it had no point and the dance was named with the
+        wrists swapped, 005_14 seed 619). Triangulated again with every blob of the candidate,
+        each merged blob by the end (:func:`~.elongation.blob_separation`) that meets the others
+        best, and kept so when they all meet within ``rough_px`` (within ``epipolar_px``, two
+        wrists on a sword hilt, each hidden from one view, made a 4-view ghost between them at
+        0.7 px, 002_07 seed 602). Its uv then holds those ends, so later triangulations of it
+        use them too (from the centroids a knee's point fell back between the knees when the
+        acceptance cut a view, 005_02 seed 620). X (K, 3) m, err (K,) px, used (C, K), uv (C, K,
+        2) px updated in place; blob (C, K) the candidates' blobs before the triangulation's
+        choice; cap (C, N) the padded blob capacities."""
+        has = blob >= 0
+        capk = np.where(has, np.take_along_axis(cap, np.where(has, blob, 0), axis=1), 0)  # (C, K)
+        for k in np.flatnonzero((has & ~used & (capk == 1)).any(axis=0) & (used & (capk > 1)).any(axis=0)).tolist():
+            cs = np.flatnonzero(has[:, k])
+            opts = []
+            for c in cs.tolist():
+                u = views[c].uv[blob[c, k]]
+                sep = blob_separation(views[c].moments[blob[c, k]][None])[0] if capk[c, k] > 1 else np.zeros(2)
+                if capk[c, k] > 1 and np.isfinite(sep).all() and np.hypot(sep[0], sep[1]) >= self.config.ends_min_px:
+                    opts.append((u + 0.5 * sep, u - 0.5 * sep))
+                else:
+                    opts.append((u,))
+            combos = list(itertools.product(*opts))
+            sub = np.full((self.C, len(combos), 2), np.nan)
+            for j, combo in enumerate(combos):
+                sub[cs, j] = combo
+            res = self.tri.triangulate(sub)
+            e = np.where(res.n_views == len(cs), res.error, np.inf)
+            j = int(np.argmin(e))
+            if np.isfinite(e[j]) and e[j] <= self.config.rough_px and self.plausible(res.points[j:j + 1])[0]:
+                X[k], err[k] = res.points[j], res.error[j]
+                used[cs, k] = True
+                uv[cs, k] = sub[cs, j]
 
     def _pairs_kept(self, X: np.ndarray, err: np.ndarray, n_views: np.ndarray, blob: np.ndarray, uv: np.ndarray,
                     missing: np.ndarray, counts: np.ndarray, ok: np.ndarray, pairs: tuple, group: np.ndarray,
@@ -678,7 +719,7 @@ class PointReconstructor:
             for (c, b), e in zip(keys, ends):
                 d = np.linalg.norm(e - proj[c], axis=1)
                 j = int(np.argmin(d))
-                centre = float(np.linalg.norm(uv[c, k] - proj[c]))
+                centre = float(np.linalg.norm(e.mean(axis=0) - proj[c]))  # the blob's centroid
                 if d[j] <= cfg.support_px and d[j] < centre:
                     got[(c, b)] = (j, float(d[j]))
                 elif d[j] > cfg.support_px and centre > cfg.support_px:
@@ -691,10 +732,12 @@ class PointReconstructor:
             sub[cams] = uv[cams, k][:, None, :]
             for i, ((c, _b), e) in enumerate(zip(keys, ends)):
                 sub[c, :-1] = e[combos[:, i]]
+                sub[c, -1] = e.mean(axis=0)  # the centroid (uv may hold an end: :meth:`_on_ends`)
             res = self.tri.triangulate(sub)
             err = np.where(res.n_views[:-1] == len(cams), res.error[:-1], np.inf)
             i = int(np.argmin(err))
-            if not (err[i] <= cfg.epipolar_px and err[i] < res.error[-1]):
+            # (centroids that meet only by dropping a view do not meet)
+            if not (err[i] <= cfg.epipolar_px and (err[i] < res.error[-1] or res.n_views[-1] < len(cams))):
                 return got, alien
             proj = self.tri.project(res.points[i:i + 1])[0][:, 0]
             for (c, b), e, j in zip(keys, ends, combos[i]):

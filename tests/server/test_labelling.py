@@ -823,6 +823,79 @@ def test_a_marker_hidden_behind_another_gives_its_blob_back_to_the_one_in_front(
     assert (d.min(axis=0) < 0.005).all(), d.min(axis=0)
 
 
+def test_a_marker_apart_in_one_view_and_merged_in_two_is_triangulated_on_the_blobs_ends():
+    """Blobs of a rendered take (a dance, traced; with the blobs' second moments): the two
+    wrists, 17 cm apart, are one merged blob in cameras 1 and 3; camera 0 sees them apart and
+    camera 2 sees only the right one. The merged blobs' centroids, between the wrists, met
+    better than the left wrist's own blob did, so the triangulation dropped that blob: the
+    left wrist had no point, two ghosts 9 cm from it stood in its place, and the dance was
+    named with its wrists swapped. On the merged blobs' ends the three views meet within
+    0.1 px: each wrist gets a point within 1.5 cm and no other point lies within 15 cm of them."""
+    blobs = [  # per camera: u, v, capacity, radius (px), second moments (px^2)
+        [[79.82, 76.75, 1, 1.6, 0.896, 0.016, 0.9], [88.76, 42.39, 1, 2.11, 1.24, 0.002, 1.261],
+         [89.71, 72.66, 1, 1.95, 1.116, 0.013, 1.108], [94.41, 89.88, 1, 1.95, 1.204, 0.044, 1.187],
+         [97.82, 41.18, 1, 1.87, 1.22, -0.026, 1.192], [98.74, 75.61, 1, 2.11, 1.247, -0.004, 1.276],
+         [99.83, 50.09, 1, 2.19, 1.518, 0.142, 1.737], [103.29, 53.68, 2, 2.11, 1.418, 0.276, 1.852],
+         [150.19, 43.33, 1, 2.03, 1.156, 0.034, 1.163], [153.85, 64.28, 1, 1.26, 0.572, -0.014, 0.691]],
+        [[6.24, 73.24, 1, 1.69, 0.939, -0.017, 0.954], [51.82, 51.47, 2, 2.82, 1.326, 0.938, 6.113],
+         [53.0, 71.68, 1, 1.78, 1.08, 0.006, 1.113], [58.12, 84.7, 1, 1.69, 0.927, -0.012, 0.922],
+         [59.47, 42.06, 1, 1.78, 0.984, 0.014, 0.951], [66.54, 43.38, 1, 1.95, 1.103, -0.032, 1.15],
+         [69.26, 72.0, 1, 1.69, 0.95, 0.016, 0.974], [79.06, 75.74, 1, 1.6, 0.845, 0.012, 0.849],
+         [147.63, 12.39, 1, 1.13, 0.642, -0.021, 0.613]],
+        [[6.98, 70.99, 1, 1.69, 0.917, -0.028, 0.934], [7.73, 29.86, 1, 1.26, 0.592, 0.029, 0.619],
+         [62.91, 45.7, 1, 1.49, 0.717, 0.015, 0.73], [64.3, 39.0, 1, 1.49, 0.853, -0.01, 0.872],
+         [66.09, 60.93, 1, 1.49, 0.732, 0.03, 0.685], [68.42, 73.83, 1, 1.38, 0.794, -0.007, 0.768],
+         [70.76, 66.48, 1, 1.6, 0.775, 0.04, 0.928], [72.68, 38.57, 1, 1.49, 0.889, -0.019, 0.932],
+         [79.24, 76.34, 1, 1.69, 0.949, -0.077, 0.983]],
+        [[79.95, 75.47, 1, 1.6, 0.825, 0.001, 0.837], [88.47, 66.04, 1, 1.49, 0.869, 0.009, 0.793],
+         [89.71, 39.18, 1, 1.49, 0.808, -0.054, 0.771], [97.27, 40.22, 1, 1.6, 0.912, 0.151, 0.928],
+         [97.45, 74.92, 1, 1.49, 0.741, -0.011, 0.739], [100.73, 62.19, 1, 1.49, 0.744, -0.002, 0.729],
+         [100.96, 45.05, 2, 2.11, 1.428, -0.888, 2.562], [150.38, 100.66, 1, 1.6, 0.941, -0.029, 0.91],
+         [150.79, 12.97, 1, 1.78, 1.094, -0.003, 1.052]],
+    ]
+    wrists = np.array([[0.232, 1.025, 1.399], [0.123, 1.074, 1.28]])  # the take's truth: left, right
+    got = _points_from_blobs(blobs)
+    d = np.linalg.norm(got.X[:, None] - wrists[None], axis=2)  # (P, 2)
+    assert (d.min(axis=0) < 0.015).all(), d.min(axis=0)
+    assert ((d < 0.15).any(axis=1)).sum() == 2, d[(d < 0.15).any(axis=1)]
+
+
+def test_two_hands_on_a_hilt_on_the_merged_blobs_ends_make_no_ghost_between_them():
+    """Blobs of a rendered take (swordplay, traced; with the blobs' second moments): the hands
+    raised on a hilt, 17 cm apart, merged in cameras 0 and 3; camera 1 sees the right one
+    apart, camera 2 the left one (each hidden from the other). Any combination of the merged
+    blobs' ends with those two blobs meets within ``epipolar_px`` somewhere between the
+    wrists (0.7 px): taken, it made a 4-view ghost 11 cm from the right wrist that the
+    tracking named. On the ends only what meets within ``rough_px`` is kept: a point on each
+    wrist and none between."""
+    blobs = [  # per camera: u, v, capacity, radius (px), second moments (px^2)
+        [[69.75, 40.62, 1, 1.87, 1.097, -0.03, 1.069], [74.39, 80.45, 1, 1.78, 0.853, 0.028, 0.949],
+         [77.14, 69.8, 1, 1.69, 0.95, -0.01, 0.931], [79.11, 30.6, 2, 2.76, 3.945, 1.462, 1.949],
+         [84.51, 81.21, 1, 1.6, 0.897, 0.027, 0.859], [84.53, 68.3, 1, 1.87, 0.998, -0.018, 0.95],
+         [149.95, 41.17, 1, 1.49, 0.712, -0.018, 0.72], [150.85, 7.08, 1, 1.6, 0.808, -0.016, 0.817]],
+        [[73.37, 32.59, 1, 1.69, 1.121, -0.216, 1.238], [75.77, 39.86, 1, 1.6, 0.925, -0.01, 0.898],
+         [76.57, 31.09, 1, 1.69, 1.265, -0.178, 1.128], [77.37, 68.76, 1, 1.69, 0.92, 0.029, 0.903],
+         [78.84, 81.74, 1, 1.6, 0.833, -0.041, 0.865], [80.84, 78.07, 1, 1.69, 1.096, -0.315, 1.083],
+         [84.05, 39.29, 1, 1.6, 0.947, -0.026, 0.942], [148.88, 18.53, 1, 1.38, 0.641, -0.035, 0.606],
+         [154.66, 111.43, 1, 1.13, 0.73, 0.025, 0.766]],
+        [[5.2, 52.72, 1, 1.26, 0.73, -0.02, 0.686], [6.85, 90.62, 1, 1.69, 0.926, 0.026, 0.95],
+         [74.62, 80.63, 1, 1.69, 0.993, 0.032, 0.899], [74.65, 66.96, 1, 1.6, 0.966, -0.037, 0.89],
+         [81.43, 29.97, 1, 1.78, 0.962, -0.026, 1.045], [81.73, 67.85, 1, 1.6, 0.937, -0.034, 0.89],
+         [82.4, 39.24, 1, 1.78, 1.061, 0.031, 1.044], [84.67, 81.58, 1, 1.69, 0.918, -0.02, 0.885],
+         [88.49, 40.02, 1, 1.6, 1.014, 0.03, 0.98]],
+        [[11.95, 96.92, 1, 1.6, 0.736, 0.022, 0.684], [74.84, 40.18, 1, 1.69, 0.954, -0.001, 0.988],
+         [77.9, 81.74, 1, 1.6, 0.809, -0.014, 0.846], [82.55, 68.89, 1, 1.6, 0.909, 0.007, 0.86],
+         [83.62, 42.52, 1, 1.95, 0.994, -0.008, 0.974], [83.88, 32.21, 2, 2.39, 3.801, 1.09, 1.433],
+         [151.91, 48.53, 1, 1.87, 1.111, -0.037, 1.133]],
+    ]
+    wrists = np.array([[0.115, 0.022, 1.917], [0.125, 0.181, 1.867]])  # the take's truth: left, right
+    got = _points_from_blobs(blobs)
+    d = np.linalg.norm(got.X[:, None] - wrists[None], axis=2)  # (P, 2)
+    assert (d.min(axis=0) < 0.015).all(), d.min(axis=0)
+    near = (d < 0.15).any(axis=1)
+    assert (d[near].min(axis=1) < 0.015).all(), d[near]
+
+
 @pytest.mark.parametrize("rough_px", [PointsConfig().rough_px, np.inf])
 def test_two_wrists_lined_up_in_other_views_are_not_made_one_ghost(rough_px):
     """Blobs of a rendered take (a climb, traced): the body hides the right wrist from camera
