@@ -2174,6 +2174,41 @@ def test_a_knee_and_its_ankle_named_the_other_way_round_in_a_high_kick_are_swapp
         assert not right[at:].any()
 
 
+def test_a_hidden_knee_named_on_its_kicking_ankle_gives_the_name_to_the_ankle():
+    """A dancer holds the right leg up in front, the ankle above the knee; the knee is hidden
+    for 0.5 s and tracking names it on the ankle's point, the ankle left unnamed (injected:
+    the knee's track moved onto the ankle's, the ankle's dropped). No body puts a knee a whole
+    leg from the hip (rms residual > 4 cm), and with the name moved to the ankle the solver
+    fits the markers within 1 cm: within 0.1 s the server names the point the ankle, the
+    knee stays unnamed while hidden, and nothing is named wrongly after."""
+    from samba_server.labelling.rigid import RA, RK
+    from samba_server.recon.reconstruct import Reconstructor
+    from samba_server.server import Server
+
+    rig = default_rig(4)
+    n, at, hidden = 240, 180, 30
+    truth = _right_leg_raised(n, 130.0, 50)
+    seen = truth.copy()
+    seen[at:at + hidden, RK] = np.nan
+    server = Server(rig, reconstructor=Reconstructor(lengths=DEFAULT_LENGTHS))
+    lab, rng = server.labeller, np.random.default_rng(8)
+    named = []
+    for i, m in enumerate(seen):
+        if i == at:
+            lab._pos[RK], lab._vel[RK], lab._seen[RK] = lab._pos[RA], lab._vel[RA], lab._seen[RA]
+            lab._pos[RA], lab._seen[RA] = np.nan, -np.inf
+        markers, _mask, _q = server.label_packets(_packets(rig, m, i / FPS, rng), i / FPS)
+        named.append(server.solve_markers(markers, i / FPS)[0])
+    named = np.array(named)
+    right = _right(named, truth)
+    on_ankle = np.linalg.norm(named[:, RK] - truth[:, RA], axis=1) < 0.02  # NaN: False
+    assert right[:at].all()
+    assert on_ankle[at:at + 2].any()  # the injected confusion took
+    back = at + int(0.1 * FPS)
+    assert right[back:, RA].all() and not on_ankle[back:].any()
+    assert (right | ~np.isfinite(named).all(axis=2))[back:].all()  # no name elsewhere
+
+
 @pytest.mark.parametrize("window", [True, False])
 def test_a_straight_leg_raised_in_front_does_not_turn_the_names_round(window):
     """A subject tracked for 1.5 s raises a straight leg 45 degrees in front. The markers so
