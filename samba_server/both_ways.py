@@ -23,7 +23,9 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   ``window_s`` before the frame (a backward rename the forward naming confirms likewise; back
   only to where the forward pass last named the marker at the same point, as there the backward
   name was right: 4 cameras, 49 takes, seeds 3 and 11, 489 -> 469 frames not all right; the
-  same cut of the forward doubt lost, 489 -> 552), the frame takes the backward name, and the
+  same cut of the forward doubt lost, 489 -> 552; the forward doubt stops only where the two
+  passes named the marker alike for ``HELD_S`` (0.1 s) in a row: a single frame alike is often
+  two wrong names crossing), the frame takes the backward name, and the
   backward names of the markers the forward pass left unnamed; every marker's of the renamed
   markers' half of the body (the legs; the shoulders and wrists) when the two namings agree as
   a whole at the rename (a rename of the ankles says nothing of the wrists). Where the two came
@@ -211,6 +213,9 @@ APART_S = 3.0
 #: s: ... and for a marker of a rename's half of the body the pass did not rename, from before
 #: an agreement of the two passes at most this long right before the rename
 JOIN_S = 0.1
+#: s: a forward rename doubts the names before it back to where the two passes named the marker
+#: at the same point for at least this long
+HELD_S = 0.1
 #: s: a stretch where the chosen name of a marker leaves the backward one, between frames where
 #: the two name it at the same point, is checked against the marker's course if at most this long
 COURSE_S = 1.0 / 3.0
@@ -403,6 +408,20 @@ def _apart_before(renamed: np.ndarray, same: np.ndarray, t: np.ndarray, own: np.
         while j >= 0 and not same[j, m] and t[k] - t[j] <= max_s:
             out[j] |= 1 << m
             j -= 1
+    return out
+
+
+def _held(mask: np.ndarray, t: np.ndarray, min_s: float, cut: np.ndarray) -> np.ndarray:
+    """(F, M) bool: mask (F, M) where it holds for at least min_s s in a row (t: (F,) s), a row
+    ending before each frame where cut (F, M) is set (a rename: the agreement before it is not
+    the one after it)."""
+    out = np.zeros_like(mask)
+    for m in range(mask.shape[1]):
+        for a, b in _runs(mask[:, m]):
+            edges = [a, *(a + np.flatnonzero(cut[a:b, m][1:]) + 1), b]
+            for a2, b2 in zip(edges[:-1], edges[1:]):
+                if t[b2 - 1] - t[a2] >= min_s - 1e-9:
+                    out[a2:b2, m] = True
     return out
 
 
@@ -926,14 +945,23 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     lin_f = _lineage(ident_f, nf.any(axis=1), forward=True, settled=settled, renamed=fwd.renamed)
     # names that descend from the standard pose's identification, with no agreement as a whole
     # of the two passes since (the backward pass never once named them so): no rename doubts them
-    doubt_f = np.where(lin_f >= STANDARD_POSE_M, 0, _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True, own=renamed)
+    # ... back to where the two passes named the marker at the same point for HELD_S: the name the
+    # rename replaced went wrong after that (a dancer's forward pass, right for 1 s, renamed the
+    # right leg after naming it wrongly for 4 frames; the backward pass, which had named it
+    # alike for 0.25 s before those, named it wrongly before that, and its names were taken:
+    # 005_05 seed 621, 94.6 -> 99.1 %). A single frame alike is no such agreement (another
+    # dance's forward legs mirrored for 0.5 s after a blackout, one knee alike for a frame)
+    doubt_f = np.where(lin_f >= STANDARD_POSE_M, 0,
+                       _doubted(confirmed, nf.any(axis=1), t, window_s, forward=True, own=renamed,
+                                confirmed=_held(both, t, HELD_S, bit_markers(renamed)))
                        | _apart_before(confirmed, same, t, own=renamed))
     # and the other way round: a backward rename counts where the forward pass names those
     # markers at the same points (tracking them, not renaming them)
     agree_b = alike & ~renamed
     # ... back only to where the forward pass last named the marker at the same point (in its
-    # travel, the backward names the rename replaced went wrong after it). Not for forward
-    # renames: the passes agreeing before one are as often both wrong alike (module docstring)
+    # travel, the backward names the rename replaced went wrong after it). For forward renames
+    # only an agreement held HELD_S (above): the passes agreeing before one are often both
+    # wrong alike (module docstring)
     doubt_b = _doubted(bwd.renamed.astype(np.int64) & agree_b, nb.any(axis=1), t, window_s, forward=False,
                        confirmed=both, own=bwd.renamed)
     lin_b = _lineage(bwd.identified, nb.any(axis=1), forward=False, renamed=bwd.renamed)

@@ -797,9 +797,39 @@ def test_names_from_the_standard_pose_the_backward_pass_never_agreed_with_are_no
     assert np.allclose(markers[:108], truth[:108])
     assert np.allclose(markers[108:112, RS], truth[108:112, RS])  # the wrong shoulder still gives way
     agreed = bwd.copy()
-    agreed[5] = truth[5]  # the two passes agree as a whole at frame 5
+    agreed[5] = truth[5]  # the two passes agree as a whole at frame 5 ...
+    agreed[107:112] = truth[107:112][:, MIRROR]  # ... and name the left shoulder alike again 2 frames only
     markers, _from_b = choose(PassResult(a, ren_f, np.zeros(F), ident), PassResult(agreed, ren_b, np.zeros(F)), t)
     assert np.allclose(markers[60:100, [LS, RS]], agreed[60:100, [LS, RS]])  # the rename's doubt holds
+
+
+def test_a_forward_rename_doubts_its_names_only_back_to_where_the_passes_agreed_for_a_while():
+    """A dance: the forward pass names the right leg right for 1 s, wrongly for 4 frames, and
+    renames it (confirmed: the backward pass names it at the same points after the rename).
+    The backward pass named it alike for 0.25 s before those 4 frames, and wrongly before that
+    (walking back in time, its own rename there went wrong). The names the forward rename
+    replaced went wrong after the two passes' agreement: the doubt stops there and the
+    backward pass's wrong names are not taken (they were for 0.4 s: 005_05 seed 621, 94.6 ->
+    99.1 % of frames all right). An agreement of one frame (``HELD_S``: 0.1 s) stops nothing."""
+    F = 300
+    t = np.arange(F) / FPS
+    truth = _in_a_row(F)
+    a = truth.copy()
+    a[200:204, RK] = truth[200:204, RA]  # forward: the knee on the ankle's point for 4 frames, renamed at 204
+    ren_f = np.zeros(F, np.int64)
+    ren_f[204] = (1 << RK) | (1 << RA)
+    for agree_from in (185, 199):  # the backward names alike from there (0.25 s; a frame)
+        b = truth.copy()
+        b[160:agree_from, RK] = truth[160:agree_from, RA]  # backward: wrong before that, renamed there
+        b[160:agree_from, RA] = np.nan
+        ren_b = np.zeros(F, np.int64)
+        ren_b[agree_from - 1] = (1 << RK) | (1 << RA)
+        markers, from_b = choose(PassResult(a, ren_f, np.zeros(F)), PassResult(b, ren_b, np.zeros(F)), t)
+        assert np.allclose(markers[200:204], truth[200:204])  # the forward pass's wrong frames mended
+        if agree_from == 185:
+            assert np.allclose(markers[:200], truth[:200]) and not from_b[:200].any()
+        else:
+            assert from_b[160:199].all()  # doubted through a frame alike: the backward names taken
 
 
 def test_a_backward_rename_doubts_its_names_only_up_to_where_the_forward_pass_confirmed_them():
