@@ -418,8 +418,7 @@ def _held(mask: np.ndarray, t: np.ndarray, min_s: float, cut: np.ndarray) -> np.
     out = np.zeros_like(mask)
     for m in range(mask.shape[1]):
         for a, b in _runs(mask[:, m]):
-            edges = [a, *(a + np.flatnonzero(cut[a:b, m][1:]) + 1), b]
-            for a2, b2 in zip(edges[:-1], edges[1:]):
+            for a2, b2 in _pieces(a, b, cut[:, m]):
                 if t[b2 - 1] - t[a2] >= min_s - 1e-9:
                     out[a2:b2, m] = True
     return out
@@ -486,6 +485,13 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     """(start, stop) of each run of True in mask (F,) bool, stop exclusive."""
     edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def _pieces(a: int, b: int, cut: np.ndarray) -> list[tuple[int, int]]:
+    """The frames [a, b) split before each frame k (a < k < b) where cut (>= b,) bool is set:
+    (start, stop) of each piece, stop exclusive."""
+    edges = [a, *(a + 1 + np.flatnonzero(cut[a + 1:b])).tolist(), b]
+    return list(zip(edges[:-1], edges[1:]))
 
 
 def _bridged(nf: np.ndarray, nb: np.ndarray, alike: np.ndarray, lead: np.ndarray) -> np.ndarray:
@@ -715,8 +721,7 @@ def _fits_better(fwd: PassResult, bwd: PassResult, nf: np.ndarray, nb: np.ndarra
     cut[np.flatnonzero(bwd.renamed) + 1] = True  # a backward rename replaced the names after it
     for a, b in _runs(apart):
         to_b, _ = _verdict(fwd, bwd, a + np.flatnonzero(judged[a:b]))
-        edges = [a, *(a + 1 + np.flatnonzero(cut[a + 1:b])), b]
-        for a2, b2 in zip(edges[:-1], edges[1:]):
+        for a2, b2 in _pieces(a, b, cut):
             out[a2:b2] = to_b and not _verdict(fwd, bwd, a2 + np.flatnonzero(judged[a2:b2]))[1]
     return out
 

@@ -488,11 +488,9 @@ class PointReconstructor:
             opts = []
             for c in cs.tolist():
                 u = views[c].uv[blob[c, k]]
-                sep = blob_separation(views[c].moments[blob[c, k]][None])[0] if capk[c, k] > 1 else np.zeros(2)
-                if capk[c, k] > 1 and np.isfinite(sep).all() and np.hypot(sep[0], sep[1]) >= self.config.ends_min_px:
-                    opts.append((u + 0.5 * sep, u - 0.5 * sep))
-                else:
-                    opts.append((u,))
+                sep = blob_separation(views[c].moments[blob[c, k]][None])[0] if capk[c, k] > 1 else np.full(2, np.nan)
+                split = np.isfinite(sep).all() and np.hypot(sep[0], sep[1]) >= self.config.ends_min_px
+                opts.append((u + 0.5 * sep, u - 0.5 * sep) if split else (u,))
             combos = list(itertools.product(*opts))
             sub = np.full((self.C, len(combos), 2), np.nan)
             for j, combo in enumerate(combos):
