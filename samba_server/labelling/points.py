@@ -588,6 +588,9 @@ class PointReconstructor:
         - A point seen only in two-marker blobs (a marker hidden behind others wherever it is
           seen) takes the other end of each blob such a point took; from >= 2 of them it is
           triangulated again on those alone: a marker, no longer two markers' midpoint.
+        - A point seen in >= 3 views, merged (capacity 2) in every one, none of whose blobs
+          another point took an end of: two markers no view separates, split on the blobs'
+          ends into the point and a new one (:meth:`_split_merged`).
         - The other marker of a point of the first kind, where no accepted point is (hidden in
           the views that do not merge it with that point), becomes a new point on the free ends
           of >= 2 views, when they meet within ``epipolar_px``.
@@ -672,9 +675,25 @@ class PointReconstructor:
                 X[k], err[k], n_views[k] = res.points[0], res.error[0], res.n_views[0]
                 uv[:, k] = sub
                 placed[r] = True
+        new: list[tuple[np.ndarray, float, np.ndarray, np.ndarray]] = []
+        taken = set(users) | set(free_end)
+        for r in np.flatnonzero((two.sum(axis=0) >= 3) & ~placed):
+            k = int(idx[r])
+            keys = [(int(c), int(blob[c, k])) for c in np.flatnonzero(blob[:, k] >= 0)]
+            if any(key in taken or not two[key[0], r] or views[key[0]].capacity[key[1]] < 2 for key in keys):
+                continue
+            others = np.vstack([X[np.setdiff1d(idx, [k])]] + [n[0][None] for n in new])
+            pair = self._split_merged(keys, [ends(key) for key in keys], others)
+            if pair is None:
+                continue
+            (X[k], err[k], sub), (Y, err_y, sub_y) = pair
+            uv[:, k] = sub
+            placed[r] = True
+            col = np.full(self.C, -1, np.int64)
+            col[[c for c, _b in keys]] = [b for _c, b in keys]
+            new.append((Y, err_y, col, sub_y))
         # the other marker of a point on ends, with no point of its own (hidden wherever it is
         # not merged with that point): a new point on the free ends of >= 2 views
-        new: list[tuple[np.ndarray, float, np.ndarray, np.ndarray]] = []
         for r in np.flatnonzero(np.isin(idx, list(moved))) if moved else ():
             k = int(idx[r])
             cs = [int(c) for c in range(self.C) if blob[c, k] >= 0 and (int(c), int(blob[c, k])) in free_end]
@@ -696,6 +715,39 @@ class PointReconstructor:
                 free_end.pop((c, int(blob[c, k])))
             new.append((Y, float(res.error[0]), col, sub))
         return done, placed, new
+
+    def _split_merged(self, keys: list[tuple[int, int]], ends: list[np.ndarray], others: np.ndarray
+                      ) -> tuple[tuple[np.ndarray, float, np.ndarray], tuple[np.ndarray, float, np.ndarray]] | None:
+        """Two markers merged in every view that sees them (keys: >= 3 (view, blob), each blob
+        holding two; ends: (2, 2) px each, :func:`~.elongation.blob_separation`): their point is
+        the midpoint, named as one marker 9-10 cm off either (a dancer's knees 19 cm apart in
+        depth, 3-5 px apart in all four views, 005_13 seed 623). The two markers are the one
+        split of the ends into two sets, one end of each blob (2^(n-1) splits), that both
+        triangulate on every view within ``epipolar_px`` (a wrong split meets only by dropping a
+        view); they are ``min_separation_m`` apart, inside the volume, and neither lies within it of
+        another point (others: (P, 3) m). Returns ((X (3,), error px, uv (C, 2)) for each
+        marker) or None when no split, or more than one, holds."""
+        cfg = self.config
+        cams = [c for c, _b in keys]
+        combos = np.array(list(itertools.product((0, 1), repeat=len(keys) - 1)))
+        combos = np.concatenate([np.zeros((len(combos), 1), np.int64), combos], axis=1)  # (S, n): the first view fixed
+        sub = np.full((self.C, 2 * len(combos), 2), np.nan)
+        for i, (c, e) in enumerate(zip(cams, ends)):
+            sub[c, :len(combos)] = e[combos[:, i]]
+            sub[c, len(combos):] = e[1 - combos[:, i]]
+        res = self.tri.triangulate(sub)
+        S = len(combos)
+        fits = (res.n_views == len(cams)) & (res.error <= cfg.epipolar_px) & self.plausible(res.points)
+        good = np.flatnonzero(fits[:S] & fits[S:])
+        if len(good) != 1:
+            return None
+        i = int(good[0])
+        A, B = res.points[i], res.points[S + i]
+        if np.linalg.norm(A - B) < cfg.min_separation_m:
+            return None
+        if len(others) and np.linalg.norm(others[:, None] - np.stack([A, B])[None], axis=2).min() < cfg.min_separation_m:
+            return None
+        return (A, float(res.error[i]), sub[:, i]), (B, float(res.error[S + i]), sub[:, S + i])
 
     def _choose_ends(self, k: int, singles: list[int], keys: list[tuple[int, int]], uv: np.ndarray,
                      ends: list[np.ndarray]) -> tuple[dict[tuple[int, int], tuple[int, float]], list[tuple[int, int]]]:
