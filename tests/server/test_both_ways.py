@@ -748,6 +748,22 @@ def test_legs_the_forward_pass_is_unsure_of_take_the_backward_names_it_is_sure_o
         assert not from_b.any()
 
 
+def _swapped_by_both(F: int, pair: tuple[int, int], cross: int) -> tuple:
+    """t (F,) s, the true markers (F, 8, 3) in a row, and two namings with their renames
+    (a, b, ren_f, ren_b), each with the pair (m, n) the wrong way round next to its own
+    rename: the forward one from frame ``cross`` until it renames them at 158, the backward
+    one (walking back in time) from cross - 1 until it renames them at 127."""
+    t = np.arange(F) / FPS
+    truth = _in_a_row(F)
+    a, b = truth.copy(), truth.copy()
+    m, n = pair
+    a[cross:158, [m, n]] = truth[cross:158, [n, m]]
+    b[128:cross, [m, n]] = truth[128:cross, [n, m]]
+    ren_f, ren_b = np.zeros(F, np.int64), np.zeros(F, np.int64)
+    ren_f[158] = ren_b[127] = (1 << m) | (1 << n)
+    return t, truth, a, b, ren_f, ren_b
+
+
 def test_where_both_passes_doubt_a_name_the_fit_splits_the_stretch_between_their_renames():
     """Two hands pass each other at frame 135 and each pass's tracking swaps them there: the
     forward pass has the wrists the wrong way round in 135-157 and renames them at 158, the
@@ -756,13 +772,7 @@ def test_where_both_passes_doubt_a_name_the_fit_splits_the_stretch_between_their
     for 135-157. The stretch splits where the passes' fits say: forward names before 135,
     backward after. Without residuals the forward names stay."""
     F = 300
-    t = np.arange(F) / FPS
-    truth = _in_a_row(F)
-    a, b = truth.copy(), truth.copy()
-    a[135:158, [LW, RW]] = truth[135:158, [RW, LW]]
-    b[128:135, [LW, RW]] = truth[128:135, [RW, LW]]
-    ren_f, ren_b = np.zeros(F, np.int64), np.zeros(F, np.int64)
-    ren_f[158] = ren_b[127] = (1 << LW) | (1 << RW)
+    t, truth, a, b, ren_f, ren_b = _swapped_by_both(F, (LW, RW), 135)
     res_f, res_b = np.full(F, 0.008), np.full(F, 0.008)  # no body fits well: no verdict of the fit
     res_f[135:158] = res_b[128:135] = 0.012  # the swapped wrists fit worse
     markers, _from_b = choose(PassResult(a, ren_f, np.zeros(F), residual=res_f),
@@ -780,13 +790,7 @@ def test_the_fit_split_of_two_doubts_does_not_count_the_frames_a_pass_renamed_in
     against 7 mm: counted, that one frame gave the split to the backward names from 128 on
     (006_04 seed 624); without it the split falls at 151."""
     F = 300
-    t = np.arange(F) / FPS
-    truth = _in_a_row(F)
-    a, b = truth.copy(), truth.copy()
-    a[151:158, [LK, RK]] = truth[151:158, [RK, LK]]
-    b[128:151, [LK, RK]] = truth[128:151, [RK, LK]]
-    ren_f, ren_b = np.zeros(F, np.int64), np.zeros(F, np.int64)
-    ren_f[158] = ren_b[127] = (1 << LK) | (1 << RK)
+    t, truth, a, b, ren_f, ren_b = _swapped_by_both(F, (LK, RK), 151)
     ren_b[128] = (1 << LA) | (1 << RA)
     res_f, res_b = np.full(F, 0.008), np.full(F, 0.008)
     res_f[128:151], res_b[128:151] = 0.0014, 0.0015  # the mirrored legs fit alike
