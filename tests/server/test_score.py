@@ -1,0 +1,35 @@
+"""Scoring a take's names against its ground truth (samba_server/labelling/score.py), as the
+labelling benchmark reports them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from samba_common.skeleton import MARKER_JOINT
+from samba_mote.sim.motion import synthetic_motion
+from samba_server.labelling.rigid import LK, RK, RW
+from samba_server.labelling.score import score_take
+
+
+def test_a_name_between_two_merged_markers_is_right_and_one_on_a_far_ghost_is_wrong():
+    """Three frames of a walk, every marker visible. Frame 0 named exactly; frame 1 the left
+    knee named by the two knees' midpoint (merged, no view parts them), 14 cm from each, a
+    little nearer its own: right; frame 2 the right wrist named on a point 33 cm from it and farther
+    still from every other marker (a static distractor): wrong, though no other marker is
+    nearer (it used to count right)."""
+    joints, _t = synthetic_motion(1.0, 60.0)
+    joints = joints[:3]
+    truth = joints[:, list(MARKER_JOINT)]
+    named = truth.copy()
+    knees = truth[1, [LK, RK]]
+    apart = knees[0] - knees[1]
+    named[1, LK] = knees.mean(axis=0) + 0.005 * apart / np.linalg.norm(apart)  # a little nearer the left knee
+    assert 0.08 < np.linalg.norm(named[1, LK] - knees[0]) < 0.16  # beyond tol_m: right as the nearest
+    away = np.cross(truth[2, RW] - truth[2, LK], [0.0, 0.0, 1.0])
+    named[2, RW] = truth[2, RW] + 0.33 * away / np.linalg.norm(away)
+    assert np.linalg.norm(np.delete(truth[2], RW, axis=0) - named[2, RW], axis=1).min() > 0.33
+    visible = np.ones((3, 8), bool)
+    s = score_take(named, joints, joints, visible, np.zeros(3, bool), 60.0)
+    assert s.frames == 3
+    assert s.wrong_frames == 1
+    assert np.isclose(s.correct, 2 / 3)
