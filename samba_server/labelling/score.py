@@ -7,8 +7,9 @@ the labelling). A named marker is *right* when it lies within ``tol_m`` of its t
 or nearer its own true position than any other marker's and within twice ``tol_m`` (a point
 between two merged markers, 9-10 cm from each), *wrong* otherwise: a name on a ghost or a
 distractor far from every marker is wrong, however far the other markers are (until the
-forty-fifth session it counted right when no other marker lay nearer: a wrist named on a
-static distractor 33 cm off for 18 frames, both passes alike, 006_07 seed 624).
+forty-fifth session it counted right when no other marker lay nearer: a still wrist whose
+point was lost named on a 2-view ghost 28-34 cm off for 18 frames, both passes alike, 006_07
+seed 624).
 """
 
 from __future__ import annotations

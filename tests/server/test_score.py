@@ -15,7 +15,7 @@ def test_a_name_between_two_merged_markers_is_right_and_one_on_a_far_ghost_is_wr
     """Three frames of a walk, every marker visible. Frame 0 named exactly; frame 1 the left
     knee named by the two knees' midpoint (merged, no view parts them), 14 cm from each, a
     little nearer its own: right; frame 2 the right wrist named on a point 33 cm from it and farther
-    still from every other marker (a static distractor): wrong, though no other marker is
+    still from every other marker (a ghost): wrong, though no other marker is
     nearer (it used to count right)."""
     joints, _t = synthetic_motion(1.0, 60.0)
     joints = joints[:3]
