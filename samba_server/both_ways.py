@@ -23,7 +23,8 @@ one tracked from the past, one from the future. The forward (live) naming stays,
   ``window_s`` before the frame (a backward rename the forward naming confirms likewise, by
   forward names not identified or renamed within ``NEXT_S`` before: an identification after a
   blackout named a dancer's crossed ankles the wrong way round and confirmed a backward rename
-  to the same wrong names 4 frames later; back only to where the forward pass last named the marker at the same point, as there the backward
+  to the same wrong names 4 frames later; back only to where the forward pass last named the
+  marker at the same point, as there the backward
   name was right: 4 cameras, 49 takes, seeds 3 and 11, 489 -> 469 frames not all right; the
   same cut of the forward doubt lost, 489 -> 552; the forward doubt stops only where the two
   passes named the marker alike for ``HELD_S`` (0.1 s) in a row: a single frame alike is often
