@@ -981,7 +981,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     # names 4 frames later, and the backward pass's right names of the 0.6 s after were
     # doubted: 005_12 seed 623, 92.8 -> 98.6 %)
     fresh_f = renamed if fwd.identified is None else \
-        renamed | np.where(np.isfinite(fwd.identified), (1 << N_MARKERS) - 1, 0)
+        renamed | np.where(np.isfinite(fwd.identified), _UPPER | _LEGS, 0)  # an identification names all
     agree_b = alike & ~_renamed_soon(fresh_f, t, NEXT_S, forward=True)
     # ... back only to where the forward pass last named the marker at the same point (in its
     # travel, the backward names the rename replaced went wrong after it). For forward renames
