@@ -14,8 +14,8 @@ Per frame (:func:`reconstruct_points`):
 4. the candidates are accepted greedily, best first (more views, fewer *unexplained* views,
    smaller error; a 2-view candidate more than ``body_radius_m`` from the >= 3-view ones
    counts two more unexplained views, one of more views that a view misses there ranks as one
-   view fewer, and so does a rough one that a view misses whose blob a better explained 2-view
-   candidate takes, :meth:`PointReconstructor._outmatched`): a blob is used at most once, a
+   view fewer, and so does a rough one that a view misses that 2-view candidates show made of
+   other markers' blobs, :meth:`PointReconstructor._outmatched`): a blob is used at most once, a
    merged blob twice (a
    candidate whose blob is taken is kept from its other views when >= 2 are left and ranked
    again by them), and two accepted points are never closer than ``min_separation_m``; an
@@ -471,12 +471,13 @@ class PointReconstructor:
     def _outmatched(self, ok: np.ndarray, X: np.ndarray, n_views: np.ndarray, err: np.ndarray, blob: np.ndarray,
                     missing: np.ndarray, far: np.ndarray, views: list[ViewBlobs]) -> np.ndarray:
         """(K,) candidates of >= 3 views that a view misses and whose views meet only roughly
-        (above ``rough_px``), one of whose single-marker blobs a 2-view candidate near the body
-        takes that is seen in a view the first one misses and is better explained: fewer views
-        miss it, or as many and it meets within a third of ``rough_px``; and that is not a
-        cross-pairing of the first one's blobs with those of another such rough candidate that
-        shares no single-marker blob with it (two markers side by side). They rank as one view
-        fewer (``FAR_GHOST``), so that the 2-view candidate goes first.
+        (above ``rough_px``) whose single-marker blobs 2-view candidates near the body that meet
+        within ``rough_px`` and that no more views miss take (*claims*) so that the first one
+        looks made of other markers' blobs: one claim seen in a view it misses that fewer views
+        miss, or two claims with no blob in common, one of them seen in a view it misses. A
+        claim that is a cross-pairing of its blobs with those of another such rough candidate
+        that shares no single-marker blob with it (two markers side by side) does not count.
+        They rank as one view fewer (``FAR_GHOST``), so that the claims go first.
 
         - A static distractor, a shoulders' merged blob and a still wrist's blob met at 0.7 px
           as a 3-view ghost 30 cm from the wrist, which camera 3 missed; it took the wrist's
@@ -484,19 +485,21 @@ class PointReconstructor:
           two cameras' images), and the wrist was named on the ghost for 0.3 s (624 006_07).
         - Crossed knees merged in one view, each hidden behind the other in another, made two
           3-view ghosts between them (0.4 and 0.75 px) of the merged blob and one blob of each
-          knee; they went before the knees' own 2-view points (0.0 and 0.02 px, each seen in the
-          view a ghost missed), and tracking swapped the knees on them (625 005_17).
+          knee; they went before the knees' own 2-view points (0.0 and 0.02 px, one of them seen
+          in the view each ghost missed), and tracking swapped the knees on them (625 005_17).
         - Not two ankles merged in one view and apart in two others, whose 3-view points (0.55
           and 0.7 px, the merged centroid between them) miss a fourth view: the two
-          cross-pairings of their blobs in the two views (0.3 px) are seen in no view they miss
-          (ranked first, the climber's legs were named mirrored for 1.5 s: 3 001_14).
+          cross-pairings of their blobs in the two views (0.3 px) are no claims (ranked first,
+          the climber's legs were named mirrored for 1.5 s: 3 001_14).
         - Not a knee hidden behind a wrist in one view, its 3-view point 0.6 px (one view
-          merged): a 2-view pairing of its blob with the other knee's in that view (0.2 px) is
-          no better explained (ranked first, the knee was named 16 cm off for 0.4 s: 3 002_10).
+          merged), nor a climber's raised wrist (0.67 px, two views merged) hidden at the top of
+          one view: one 2-view pairing of its one blob with another marker's in that view (0.2
+          and 0.02 px) that as many views miss is one claim (ranked first, the knee was named
+          16 cm off for 0.4 s: 3 002_10; the wrist's name was taken for 0.5 s: 624 001_14).
         - Not two knees whose 3-view points (0.46 and 0.64 px) share a merged blob and miss one
           view each (each hidden behind the other there): a pairing of one's blob with the
-          other's (0.1 px) is a cross-pairing of two points that stand side by side, not a
-          better explanation (ranked first, a dancer's knees were swapped: 3 006_02).
+          other's (0.1 px) is a cross-pairing (ranked first, a dancer's knees were swapped: 3
+          006_02).
 
         ok, n_views, err, missing, far (K,); X (K, 3) m; blob (C, K)."""
         cfg = self.config
@@ -513,18 +516,19 @@ class PointReconstructor:
                 single[c] = (blob[c] >= 0) & (v.capacity[np.maximum(blob[c], 0)] == 1)
         for i, s in enumerate(rough.tolist()):
             seen_missed = (blob[missed[:, i]] >= 0).any(axis=0)  # (K,) seen in a view s misses
-            # fewer views miss it, or as many and it meets within a third of rough_px
-            better = whole & seen_missed & ((missing < missing[s])
-                                            | ((missing == missing[s]) & (err <= cfg.rough_px / 3)))
-            # ... and is not a cross-pairing of s's blobs with those of a rough candidate that
-            # can stand beside s (they share no single marker's blob): two markers, not a ghost
+            # rough candidates that can stand beside s (they share no single marker's blob)
             mates = [r for r in rough.tolist() if r != s and not (single[:, s] & (blob[:, r] == blob[:, s])).any()]
-            for q in np.flatnonzero(better & (single & (blob == blob[:, [s]])).any(axis=0)).tolist():
+            claims: list[int] = []  # 2-view candidates no more views miss, on s's single-marker blobs
+            for q in np.flatnonzero(whole & (missing <= missing[s]) & (single & (blob == blob[:, [s]])).any(axis=0)):
                 cs = np.flatnonzero(blob[:, q] >= 0)
                 if not any(((blob[cs, q] == blob[cs, s]) | (blob[cs, q] == blob[cs, r])).all()
                            and (blob[cs, q] == blob[cs, r]).any() for r in mates):
-                    out[s] = True
-                    break
+                    claims.append(int(q))  # (not a cross-pairing of s's blobs with a mate's: two markers)
+            # one seen where s is missed and fewer views miss it, or two on two of s's blobs
+            # (no blob in common), one of them seen where s is missed: s mixes two markers
+            out[s] = any(seen_missed[q] and missing[q] < missing[s] for q in claims) or any(
+                (seen_missed[q1] or seen_missed[q2]) and not ((blob[:, q1] >= 0) & (blob[:, q1] == blob[:, q2])).any()
+                for q1, q2 in itertools.combinations(claims, 2))
         return out
 
     def _on_ends(self, X: np.ndarray, err: np.ndarray, used: np.ndarray, blob: np.ndarray, uv: np.ndarray,

@@ -988,7 +988,8 @@ _ROUGH_BUT_RIGHT = {
     ], [[-0.7323, 1.4555, 1.7657], [-0.5249, 1.4875, 1.7108]]),
     # swordplay (002_10 seed 3): the right knee, merged with the right wrist in camera 0, apart
     # in cameras 1 and 3, hidden behind the left wrist in camera 2; its point at 0.6 px, its
-    # camera-3 blob with the left knee's in camera 2 at 0.2 px (as many views miss it)
+    # camera-3 blob with the left knee's in camera 2 at 0.2 px, as many views missing it: one
+    # pairing on one of its blobs
     "a knee behind a wrist": ([
         [[5.05, 36.09, 1, 1.38, 0.773, 0.013, 0.777], [9.12, 101.7, 1, 1.78, 0.994, -0.007, 1.001],
          [78.86, 82.18, 2, 2.52, 4.449, -1.607, 1.75], [82.62, 75.67, 2, 2.46, 3.816, 1.719, 2.129],
@@ -1032,12 +1033,12 @@ _ROUGH_BUT_RIGHT = {
 
 @pytest.mark.parametrize("case", list(_ROUGH_BUT_RIGHT))
 def test_rough_3_view_markers_keep_their_points_over_2_view_pairings_no_better_explained(case: str):
-    """The other side of `_outmatched` (the two tests above): a 2-view pairing goes before a
-    rough 3-view point only when it is better explained. Seen in no view the point misses (two
-    ankles' cross-pairings), missed by as many views and not within a third of ``rough_px`` (a
-    knee's blob paired with the other knee's), or a cross-pairing of two rough points that share
-    only a merged blob (two knees side by side): each ranked first in a trial and a leg was
-    named mirrored or 16 cm off for 0.1-1.5 s. Every marker keeps a point within 1 cm."""
+    """The other side of `_outmatched` (the two tests above): 2-view pairings go before a
+    rough 3-view point only when they make it look made of other markers' blobs. Not two
+    ankles' cross-pairings, nor one pairing as well explained on one of a knee's blobs, nor a
+    cross-pairing of two rough points that share only a merged blob (two knees side by side):
+    each ranked first in a trial and a leg was named mirrored or 16 cm off for 0.1-1.5 s.
+    Every marker keeps a point within 1 cm."""
     blobs, truth = _ROUGH_BUT_RIGHT[case]
     got = _points_from_blobs(blobs)
     d = np.linalg.norm(got.X[:, None] - np.array(truth)[None], axis=2)  # (P, markers)
