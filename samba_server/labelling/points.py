@@ -510,10 +510,7 @@ class PointReconstructor:
             return out
         proj, depth = self.tri.project(X[rough])
         missed = self._inside(proj, depth) & (blob[:, rough] < 0)  # (C, R) views in whose image each falls, no blob
-        single = np.zeros(blob.shape, bool)  # (C, K) the view's blob holds one marker
-        for c, v in enumerate(views):
-            if len(v):
-                single[c] = (blob[c] >= 0) & (v.capacity[np.maximum(blob[c], 0)] == 1)
+        single = _blob_capacity(blob, views) == 1  # (C, K) the view's blob holds one marker
         for i, s in enumerate(rough.tolist()):
             seen_missed = (blob[missed[:, i]] >= 0).any(axis=0)  # (K,) seen in a view s misses
             # rough candidates that can stand beside s (they share no single marker's blob)
