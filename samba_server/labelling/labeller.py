@@ -93,7 +93,7 @@ class LabelConfig:
     split_share_s: float = 0.1  #: a knee and the other leg's ankle on one point are placed either side of it along their predictions for this long, then both on it (inf: always split)
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
-    rescue_m: float = 0.06  #: a tracked shoulder or wrist with no point is triangulated from two views' blobs within this of its prediction (0: never) ...
+    rescue_m: float = 0.06  #: a tracked marker with no point (a leg only while the legs' names are sure) is triangulated from two views' blobs within this of its prediction (0: never) ...
     rescue_px: float = 0.3  #: ... that meet within this (rms reprojection error, px) ...
     rescue_max_s: float = 1.0  #: ... for at most this long after it was last named on a point
     recover_gate_m: float = 0.45  #: a marker left out may take a free, sure point this far from its prediction ...
@@ -739,16 +739,23 @@ class Labeller:
         out (8, 3), assign (8,) (the point per marker, -1 none) from tracking; pred (8, 3). Fills
         out in place; returns how many markers it named. Three cameras or more: with two, a
         marker the points stage left without a point is mostly a ghost pair it rejected
-        (swordplay lost 8 points). Shoulders and wrists only (:data:`_UPPER`): a knee or ankle
-        that goes unnamed for a frame is how the legs' swap rules get to see a swapped pair (a
-        dance's legs, named the other way round after a blackout, kept those names 0.8 s
-        longer when the left knee was rescued on the right knee's blobs)."""
+        (swordplay lost 8 points). Knees and ankles only while the legs' names are sure
+        (:attr:`legs_unsure` False), shoulders and wrists always (:data:`_UPPER`): a knee or
+        ankle that goes unnamed for a frame is how the legs' swap rules get to see a swapped
+        pair (a dance's legs, named the other way round after a blackout, kept those names 0.8 s
+        longer when the left knee was rescued on the right knee's blobs), and names given afresh
+        are unsure until the knees are seen apart. Sure, a leg is rescued like an arm: a dancer's
+        ankles at the volume's edge, side by side on an epipolar plane of the only two cameras
+        that see them, lost both their points to a chain of ghosts (one ankle's blob with the
+        other's, the other's with a static distractor's merged blob) and went unnamed for 0.9 s
+        (006_02 seed 629)."""
         cfg = self.config
         C = len(self._views)
         if cfg.rescue_m <= 0 or C < 3:
             return 0
         age = t - self._seen
-        todo = [m for m in _UPPER if assign[m] < 0 and not np.isfinite(out[m]).all()
+        which = _UPPER if self._legs_unsure else tuple(range(N_MARKERS))
+        todo = [m for m in which if assign[m] < 0 and not np.isfinite(out[m]).all()
                 and age[m] <= cfg.track_timeout and np.isfinite(pred[m]).all()
                 and t - self._on_point[m] <= cfg.rescue_max_s]
         if not todo:
