@@ -943,11 +943,14 @@ class Labeller:
                 # the one marker unnamed, a wrist: anywhere within its arm's reach, if nearer
                 # its own shoulder than the other one (else at a cost), clear of the named
                 # markers (a point hugging one is more likely its ghost), not a static
-                # reflection, and not a point whose every blob a named marker uses too (a ghost
-                # where two merged blobs' rays cross; one that no view misses too: a right
-                # shoulder's, 15.6 cm from it, took a dribbler's left wrist 35 cm off, 002_09
-                # seed 629): a wrist lost where its prediction went wrong (hands together on a
-                # sword hilt) is found again
+                # reflection, not a doubtful 2-view point whose every blob a named marker uses
+                # too (a ghost where two merged blobs' rays cross), and not a point whose every
+                # blob a named shoulder uses, doubtful or not (the rays of a right shoulder's
+                # merged blobs crossed 15.6 cm from it where no view missed them, and a
+                # dribbler's lost left wrist was named there 35 cm off, 002_09 seed 629; any
+                # named marker's: hands together on a hilt make such points of each other's
+                # blobs, and swordplay lost 1.7 points): a wrist lost where its prediction went
+                # wrong (hands together on a sword hilt) is found again
                 own, other = (LS, RS) if m == LW else (RS, LS)
                 ds = np.linalg.norm(X - named[own], axis=1)
                 do = np.linalg.norm(X - named[other], axis=1)

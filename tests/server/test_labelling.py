@@ -2635,7 +2635,7 @@ def test_a_lost_wrist_is_not_found_on_a_ghost_made_only_of_a_shoulders_merged_bl
     merged blobs cross 15.6 cm from it, a 2-view point (0.13 px) that no view misses. The left
     wrist, its own point lost, was found again on it as the one lost wrist within its arm's
     reach (:meth:`Labeller._recover`), 35 cm off, for 3 frames. A point with no blob of its
-    own, every blob of it used by a named marker's point, is no candidate there, missed by a
+    own, every blob of it used by a named shoulder's point, is no candidate there, missed by a
     view or not (before, only when a view missed it)."""
     blobs = [  # per camera: u, v, capacity, radius (px), second moments (px^2)
         [[6.07, 65.96, 1, 1.49, 0.693, -0.01, 0.709], [12.58, 69.58, 1, 1.95, 0.964, -0.011, 0.946],
