@@ -698,6 +698,16 @@ def _server_triangulator(rig) -> Triangulator:
     return Triangulator(rig, TriangulateConfig(max_error_px=1.0))
 
 
+def _labeller_on_blobs(blobs: list, config: LabelConfig | None = None) -> tuple[Labeller, Points3D]:
+    """A Labeller of the default 4-camera rig (the triangulator settings of configs/server.toml)
+    holding one traced frame's views (blob lists as :func:`_views_from_blobs` reads them), and
+    that frame's 3D points."""
+    rig = default_rig(4)
+    lab = Labeller(rig, _server_triangulator(rig), config)
+    lab._views = _views_from_blobs(blobs)
+    return lab, lab.points.reconstruct(lab._views)
+
+
 def _points_from_blobs(blobs: list, config: PointsConfig | None = None) -> Points3D:
     """3D points of one frame of the default 4-camera rig from per-camera blob lists
     [[u, v, capacity, radius (px)], ...] (a traced frame of a rendered take), with the
@@ -2512,10 +2522,7 @@ def test_two_ankles_the_points_stage_paired_crossed_are_repaired_by_their_predic
     ]
     truth = np.array([[0.167, -3.003, 1.739], [0.591, -3.014, 1.708], [0.058, -2.852, 1.306], [0.85, -2.801, 1.522],
                       [0.228, -2.885, 0.626], [0.437, -2.878, 0.628], [0.155, -3.11, 0.087], [0.43, -3.106, 0.085]])
-    rig = default_rig(4)
-    lab = Labeller(rig, _server_triangulator(rig), LabelConfig(rescue_m=0.0) if case == "off" else None)
-    lab._views = _views_from_blobs(blobs)
-    pts = lab.points.reconstruct(lab._views)
+    lab, pts = _labeller_on_blobs(blobs, LabelConfig(rescue_m=0.0) if case == "off" else None)
 
     def off() -> np.ndarray:  # (2,) m: each ankle to its nearest point
         return np.linalg.norm(pts.X[:, None] - truth[None, [LA, RA]], axis=2).min(axis=0)
@@ -2557,10 +2564,7 @@ def test_ankles_whose_blobs_ghosts_took_are_named_from_their_own_blobs_while_the
     ]
     truth = np.array([[0.137, -2.866, 1.725], [0.575, -2.866, 1.699], [-0.013, -2.735, 1.277], [0.868, -2.663, 1.497],
                       [0.212, -2.755, 0.6], [0.417, -2.747, 0.602], [0.148, -2.959, 0.084], [0.413, -2.955, 0.083]])
-    rig = default_rig(4)
-    lab = Labeller(rig, _server_triangulator(rig))
-    lab._views = _views_from_blobs(blobs)
-    pts = lab.points.reconstruct(lab._views)
+    lab, pts = _labeller_on_blobs(blobs)
     d = np.linalg.norm(pts.X[:, None] - truth[None], axis=2)  # (P, 8)
     # the setting: no point within 5 cm of either ankle, one within 3 cm of every other marker,
     # and the ghosts not two crossed pairs
@@ -2608,10 +2612,7 @@ def test_a_wrist_whose_prediction_drifted_while_hidden_is_rescued_within_a_reach
     ]
     truth = np.array([[0.182, -0.306, 1.525], [-0.029, 0.012, 1.565], [-0.114, -0.445, 1.434], [-0.259, -0.372, 1.416],
                       [-0.025, -0.288, 0.573], [-0.135, 0.024, 0.593], [0.16, -0.21, 0.083], [-0.019, 0.192, 0.105]])
-    rig = default_rig(4)
-    lab = Labeller(rig, _server_triangulator(rig), replace(LabelConfig(), rescue_growth=growth))
-    lab._views = _views_from_blobs(blobs)
-    pts = lab.points.reconstruct(lab._views)
+    lab, pts = _labeller_on_blobs(blobs, replace(LabelConfig(), rescue_growth=growth))
     d = np.linalg.norm(pts.X[:, None] - truth[None], axis=2)  # (P, 8)
     assert d[:, LW].min() > 0.05 and (np.delete(d, LW, axis=1).min(axis=0) < 0.03).all()  # the setting
     pred = truth.copy()
@@ -2658,10 +2659,7 @@ def test_a_lost_wrist_is_not_found_on_a_ghost_made_only_of_a_shoulders_merged_bl
     ]
     truth = np.array([[0.16, -0.282, 1.518], [-0.031, 0.046, 1.569], [-0.145, -0.391, 1.403], [-0.315, -0.296, 1.408],
                       [-0.037, -0.26, 0.57], [-0.148, 0.05, 0.59], [0.162, -0.206, 0.083], [-0.02, 0.191, 0.096]])
-    rig = default_rig(4)
-    lab = Labeller(rig, _server_triangulator(rig))
-    lab._views = _views_from_blobs(blobs)
-    pts = lab.points.reconstruct(lab._views)
+    lab, pts = _labeller_on_blobs(blobs)
     d = np.linalg.norm(pts.X[:, None] - truth[None], axis=2)  # (P, 8)
     assign = d.argmin(axis=0)
     assign[LW] = -1  # every marker but the left wrist named on its nearest point
