@@ -589,6 +589,10 @@ class Labeller:
                 if stale[w]:
                     cost[:, w] += cfg.wrist_side_w * np.maximum(0.0, extra)
         ok = np.isfinite(d) & (d_eff <= gate[None, :])
+        # a rough 2-view point two views miss (merged blobs' centroids paired up) is no place
+        # to find a marker predicted from the skeleton (unseen longer than track_timeout)
+        rough = (pts.n_views[row_pt] < 3) & (pts.unexplained[row_pt] >= 2) & (pts.error[row_pt] > self.points.config.rough_px)
+        ok &= ~(rough[:, None] & (t - self._seen > cfg.track_timeout)[None, :])
         big = 1e3
         full = np.full((Pr, N_MARKERS + Pr), big)
         full[:, :N_MARKERS] = np.where(ok, cost, big)
