@@ -18,7 +18,9 @@ Per frame (:func:`reconstruct_points`):
    other markers' blobs, :meth:`PointReconstructor._outmatched`): a blob is used at most once, a
    merged blob twice (a
    candidate whose blob is taken is kept from its other views when >= 2 are left and ranked
-   again by them), and two accepted points are never closer than ``min_separation_m``; an
+   again by them; a precise 2-view one shares a single blob with a rough 3-view point, two
+   markers a pixel apart there, :meth:`PointReconstructor._blended`), and two accepted points
+   are never closer than ``min_separation_m``; an
    accepted point seen by >= 4 views with an error above ``rough_px`` may be a ghost made of
    two markers' blobs: the acceptance is run again without it, or with it split into two
    points from two sets of its views (two markers each hidden from the views that see the
@@ -80,6 +82,7 @@ class PointsConfig:
     rough_px: float = 0.3  #: an accepted >= 4-view point this rough is checked for a ghost (``_unghost``)
     elongated_px: float = 2.0  #: a blob of a single marker's size whose moments part two markers by this much holds two
     split_fit_ratio: float = 0.33  #: a rough point that fits within rough_px and this share of its error less one view is one marker with a bad view: not split
+    blend_px: float = 0.1  #: a 2-view candidate this precise that no view misses, seen in a merged blob by a third view, shares a single-marker blob with a rough (rough_px) point of 3 views (0: never)
 
 
 @dataclass
@@ -1000,11 +1003,20 @@ class PointReconstructor:
         heapq.heapify(heap)
         keep: list[int] = []
         kept: list[tuple[float, float, float]] = []  # their positions (m): accepted points are not moved again
+        owner: dict[tuple[int, int], int] = {}  # (view, single-marker blob) -> the accepted point that took it
         while heap:
             k = heapq.heappop(heap)[3]
             row = rows[k]
             cs = [c for c in range(C) if row[c] >= 0]
             taken = [c for c in cs if capl[c][row[c]] <= 0]
+            blend = self._blended(k, taken, row, owner, penalty, err, n_views, X[k], views)
+            if blend is not None and not _too_close(kept, *X[k].tolist(), cfg.min_separation_m):
+                for c in cs:
+                    capl[c][row[c]] -= 1
+                del owner[blend]  # shared once at most
+                keep.append(k)
+                kept.append(tuple(X[k].tolist()))
+                continue
             if taken:
                 # a hidden marker projects onto the blob of the marker in front of it: the
                 # view is explained, but its blob is the other point's. Keep the point from
@@ -1019,11 +1031,49 @@ class PointReconstructor:
                 continue
             for c in cs:
                 capl[c][row[c]] -= 1
+                if views[c].capacity[row[c]] == 1:
+                    owner[(c, row[c])] = k
             keep.append(k)
             kept.append((x, y, z))
             if len(keep) >= cfg.max_points:
                 break
         return keep, capl
+
+    def _blended(self, k: int, taken: list[int], row: list[int], owner: dict[tuple[int, int], int],
+                 penalty: np.ndarray, err: np.ndarray, n_views: np.ndarray, x: np.ndarray,
+                 views: list[ViewBlobs]) -> tuple[int, int] | None:
+        """Two markers about a pixel apart in one view make one blob of a single marker's size
+        there (a dancer's knees, 1.0 px apart in camera 1): its centroid lies between them. The
+        first marker's point, seen by 3 views, takes it and comes out rough (above
+        ``rough_px``, 0.56 px); the second one's candidate, left with one view, was dropped, and a
+        ghost of its other blob named it 15 cm off (seed 631 005_17). Candidate k (rows[k] = row,
+        its blob per view) shares that blob when it is the only one taken, the point that took it
+        is such a rough point, and k has >= 2 views, within ``blend_px``, that no view misses,
+        its other blobs a single marker's (a 2-view ghost of a merged blob and a shoulder's,
+        0.07 px, was named a wrist 27 cm off: seed 3 002_09), and a view it does not use sees it
+        in a merged blob (camera 3 saw both knees in one; where only two cameras see the legs,
+        ghosts pair up as precisely: a knee was named 20 cm off on one, seed 629 006_02). A rough
+        point of >= 4 views is :meth:`_unghost`'s (a shoulder hidden behind the other in one view
+        takes the other's blob there as its fourth view, and is cut from it). x (3,) m: k's
+        position. Returns the shared (view, blob), or None."""
+        cfg = self.config
+        if len(taken) != 1 or penalty[k] != 0 or n_views[k] < 2 or not (0 < cfg.blend_px and err[k] <= cfg.blend_px):
+            return None
+        key = (taken[0], row[taken[0]])
+        o = owner.get(key)
+        if o is None or n_views[o] != 3 or not err[o] > cfg.rough_px:
+            return None
+        if any(views[c].capacity[row[c]] != 1 for c in range(self.C) if row[c] >= 0):
+            return None
+        # a third view sees it in a merged blob (two cameras alone pair up ghosts as precisely)
+        proj, depth = self.tri.project(x[None])
+        for c, v in enumerate(views):
+            if row[c] >= 0 or not len(v) or not depth[c, 0] > 0.1:
+                continue
+            d = np.linalg.norm(v.uv - proj[c, 0], axis=1) - self._merged_extra(v)
+            if ((v.capacity > 1) & (d <= cfg.support_px)).any():
+                return key
+        return None
 
     def _reclaim(self, keep: list[int], capl: list[list[int]], views: list[ViewBlobs], ok: np.ndarray,
                  fresh: tuple, accepted: tuple, uv: np.ndarray) -> list[int]:
