@@ -2718,10 +2718,9 @@ def test_a_stale_wrist_is_not_named_on_a_rough_2_view_point_two_views_miss():
     to_rw, to_lw = (np.linalg.norm(pts.X - truth[m], axis=1) for m in (RW, LW))
     assert to_rw.min() > 0.09 and np.argmin(to_rw) == np.argmin(to_lw)
     t = 10.0
-    lab._t_prev = lab._t_frame = t - 1 / FPS
+    lab._t_prev, lab._t_frame = t - 1 / FPS, t
     lab._seen[:] = t - 1 / FPS
     lab._seen[RW] = t - 0.133
-    lab._t_frame = t
     out, q, assign = lab._track(pts, pred, gate, t)
     assert assign[RW] == -1 and not np.isfinite(out[RW]).any(), assign
     assert (np.linalg.norm(out[[LW, RS, LK, RK, LA, RA]] - truth[[LW, RS, LK, RK, LA, RA]], axis=1) < 0.03).all()
