@@ -41,6 +41,7 @@ from samba_common.skeleton import MARKER_JOINT, N_MARKERS
 
 from ..triangulate import Triangulator
 from .blobs import median_rows, view_blobs
+from .clutter import StillBlobs
 from .blobs import warm_up as warm_up_blobs
 from .elongation import blob_separation, jacobians, separation_3d
 from .identify import Hint, identify, right_of, score_labels, sized
@@ -212,6 +213,7 @@ class Labeller:
         self.rig = rig
         self.config = config or LabelConfig()
         self.points = PointReconstructor(rig, triangulator or Triangulator(rig), self.config.points)
+        self._still = StillBlobs(self.config.points.still_s, self.config.points.still_px)
         warm_up_blobs()
         self.stats = LabelStats()
         # the prior body (database mean); _body is the body the rules use: the prior at the size of the
@@ -369,6 +371,7 @@ class Labeller:
         t: seconds. Returns ((8, 3) world metres, NaN = not named; quality)."""
         self._renamed = 0
         out, q = self._label(packets, t)
+        self._still.update(self._views, self._blobs_of(out), t)
         q.renamed = self._renamed
         self.stats.renames += int(self._renamed != 0)
         self.last_quality = q
@@ -495,7 +498,7 @@ class Labeller:
         self._rescued[:] = False
         self._rescue_blobs = []
         self._views = [view_blobs(p) for p in packets]
-        pts = self._pts = self.points.reconstruct(self._views)
+        pts = self._pts = self.points.reconstruct(self._views, self._still.clutter(self._views, t))
         if len(pts) >= 2:
             self.stats.frames_with_points += 1
             sure = pts.X[pts.n_views >= 3]

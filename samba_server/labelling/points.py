@@ -82,6 +82,8 @@ class PointsConfig:
     rough_px: float = 0.3  #: an accepted >= 4-view point this rough is checked for a ghost (``_unghost``)
     elongated_px: float = 2.0  #: a blob of a single marker's size whose moments part two markers by this much holds two
     split_fit_ratio: float = 0.33  #: a rough point that fits within rough_px and this share of its error less one view is one marker with a bad view: not split
+    still_s: float = 2.0  #: a blob that sat still (within still_px) this long with no name on it is a static reflection: candidates using it rank one view fewer (inf: never; :mod:`.clutter`)
+    still_px: float = 0.5  #: ... still within this (MJPG moves a static blob's centroid by up to 0.3 px)
     blend_px: float = 0.1  #: a 2-view candidate this precise that no view misses, seen in a merged blob by a third view, shares a single-marker blob with a rough (rough_px) point of 3 views (0: never)
 
 
@@ -317,8 +319,11 @@ class PointReconstructor:
             uv[c, :len(v)], ex[c, :len(v)], cap[c, :len(v)] = v.uv, extra[c], v.capacity
         return uv, ex, cap
 
-    def reconstruct(self, views: list[ViewBlobs]) -> Points3D:
-        """Points of one frame from per-view blobs (rig order; empty ViewBlobs for a missing view)."""
+    def reconstruct(self, views: list[ViewBlobs], clutter: list[np.ndarray] | None = None) -> Points3D:
+        """Points of one frame from per-view blobs (rig order; empty ViewBlobs for a missing view).
+        clutter: per view (N,) bool, the blobs that are static reflections
+        (:class:`~samba_server.labelling.clutter.StillBlobs`): candidates using one rank one
+        view fewer."""
         cfg, C = self.config, self.C
         extra = [self._merged_extra(v) for v in views]
         pad_uv, pad_extra, pad_cap = self._padded(views, extra)
@@ -418,8 +423,8 @@ class PointReconstructor:
             # went before the knee, left with 2 views by a hidden marker's point (003_01)
             far_ghost = (n_views >= 3) & (missing > 0) & away
         # greedy acceptance, best first
-        penalty = missing + 2 * far + FAR_GHOST * (far_ghost | self._outmatched(ok, X, n_views, err, blob, missing, far,
-                                                                                  views))
+        penalty = missing + 2 * far + FAR_GHOST * (far_ghost | self._on_clutter(blob, clutter) | self._outmatched(
+            ok, X, n_views, err, blob, missing, far, views))
         fresh = (X.copy(), err.copy(), n_views.copy(), blob.copy())  # before acceptance reduces candidates
         keep, capl = self._accept(penalty, views, ok, X, err, n_views, blob, uv)
         keep, capl, X, err, n_views, blob, uv, missing = self._unghost(keep, capl, penalty, views, ok,
@@ -470,6 +475,17 @@ class PointReconstructor:
         behind = self._behind(views, proj, depth, n_views[idx], blob, missing)
         return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing, blob,
                         votes, n_merged > 0, merged_all, n_merged, mirrored, behind)
+
+    @staticmethod
+    def _on_clutter(blob: np.ndarray, clutter: list[np.ndarray] | None) -> np.ndarray:
+        """(K,) bool: the candidates of blob (C, K) (-1 = none) that use a blob clutter (per view
+        (N,) bool, or None) marks."""
+        out = np.zeros(blob.shape[1], bool)
+        for c, cl in enumerate(clutter or []):
+            if cl.any():
+                has = blob[c] >= 0
+                out[has] |= cl[blob[c, has]]
+        return out
 
     def _outmatched(self, ok: np.ndarray, X: np.ndarray, n_views: np.ndarray, err: np.ndarray, blob: np.ndarray,
                     missing: np.ndarray, far: np.ndarray, views: list[ViewBlobs]) -> np.ndarray:
