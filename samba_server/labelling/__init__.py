@@ -6,7 +6,8 @@ The data path of one frame (:class:`~samba_server.labelling.labeller.Labeller`):
    motes' labels kept as hints;
 2. :mod:`.points` — correspondences across views with epipolar gating on undistorted
    coordinates, candidates triangulated from >= 2 views, support gathered from every other
-   view, ghosts rejected, a merged blob allowed to stand for two markers;
+   view, ghosts rejected, a merged blob allowed to stand for two markers; candidates on a
+   static reflection (:mod:`.clutter`, learnt per view) ranked one view fewer;
 3. :mod:`.labeller` — the points named as the 8 markers by an optimal assignment against the
    predicted markers, checked against what is rigid for this subject (:mod:`.rigid`), markers
    left out recovered from the free points;

@@ -18,31 +18,11 @@ candidates still make points, they only go after the others.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from .blobs import ViewBlobs
 
-__all__ = ["StillBlobs"]
-
-
-class _ViewStill:
-    """Still positions of one view: pos (K, 2) px (running mean), since (K,) s, seen (K,) s."""
-
-    def __init__(self) -> None:
-        self.pos = np.zeros((0, 2))
-        self.n = np.zeros(0, np.int64)  # frames averaged (capped)
-        self.since = np.zeros(0)  # s: still there (and unnamed) since
-        self.seen = np.zeros(0)  # s: last frame a blob was there
-
-    def match(self, uv: np.ndarray, radius: float) -> np.ndarray:
-        """(N,) index of the position each blob uv (N, 2) px lies within radius of, or -1."""
-        out = np.full(len(uv), -1, np.int64)
-        if not len(self.pos) or not len(uv):
-            return out
-        d2 = ((uv[:, None, :] - self.pos[None]) ** 2).sum(axis=2)  # (N, K)
-        j = d2.argmin(axis=1)
-        close = d2[np.arange(len(uv)), j] <= radius * radius
-        out[close] = j[close]
-        return out
+__all__ = ["StillBlobs", "warm_up"]
 
 
 class StillBlobs:
@@ -51,25 +31,33 @@ class StillBlobs:
     still_s: seconds a blob must sit still, never named, to count as clutter (inf: never);
     still_px: how still (px); gap_s: a position no blob came back to for this long starts
     over (a moving marker leaves one per frame); forget_s: ... or, once clutter, this long
-    (the body may hide a reflection for a while)."""
+    (the body may hide a reflection for a while). Per frame, :meth:`clutter` before the points
+    stage, :meth:`update` once the markers are named."""
 
     def __init__(self, still_s: float, still_px: float, gap_s: float = 0.25, forget_s: float = 2.0) -> None:
         self.still_s, self.still_px, self.gap_s, self.forget_s = still_s, still_px, gap_s, forget_s
-        self._views: list[_ViewStill] = []
+        #: per view: pos (K, 2) px running means, n (K,) frames averaged (capped), since (K,) s still
+        #: (and unnamed) since, seen (K,) s last frame a blob was there
+        self._state: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._matched: tuple[list, list[np.ndarray]] = ([], [])  # (views, (N,) position of each blob or -1)
+
+    def _view(self, c: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        while len(self._state) <= c:
+            self._state.append((np.zeros((0, 2)), np.zeros(0, np.int64), np.zeros(0), np.zeros(0)))
+        return self._state[c]
 
     def clutter(self, views: list[ViewBlobs], t: float) -> list[np.ndarray]:
         """Per view (N,) bool: the blob of views (this frame's, rig order) sits where a blob sat
         still and unnamed for still_s up to t (s)."""
-        out = [np.zeros(len(v), bool) for v in views]
         if not np.isfinite(self.still_s):
-            return out
+            return [np.zeros(len(v), bool) for v in views]
+        out, matched = [], []
         for c, v in enumerate(views):
-            if c >= len(self._views) or not len(v):
-                continue
-            vs = self._views[c]
-            j = vs.match(v.uv, self.still_px)
-            has = j >= 0
-            out[c][has] = t - vs.since[j[has]] >= self.still_s
+            pos, _n, since, _seen = self._view(c)
+            j, flag = _match(pos, since, np.asarray(v.uv, float).reshape(-1, 2), self.still_px, t, self.still_s)
+            matched.append(j)
+            out.append(flag)
+        self._matched = (views, matched)
         return out
 
     def update(self, views: list[ViewBlobs], named: np.ndarray, t: float) -> None:
@@ -77,28 +65,87 @@ class StillBlobs:
         marker (-1: none; :meth:`Labeller._blobs_of`); t s (increasing)."""
         if not np.isfinite(self.still_s):
             return
-        while len(self._views) < len(views):
-            self._views.append(_ViewStill())
+        same = self._matched[0] is views
         for c, v in enumerate(views):
-            vs = self._views[c]
-            uv = v.uv
-            j = vs.match(uv, self.still_px)
-            used = np.zeros(len(uv), bool)
-            if c < named.shape[1]:
-                b = named[:, c]
-                used[b[(b >= 0) & (b < len(uv))]] = True
-            has = np.flatnonzero(j >= 0)
-            if len(has):
-                k = j[has]
-                w = np.minimum(vs.n[k], 50)[:, None]
-                vs.pos[k] = (vs.pos[k] * w + uv[has]) / (w + 1)
-                vs.n[k] += 1
-                vs.seen[k] = t
-                vs.since[k[used[has]]] = t  # a name uses it: a marker, not clutter
-            new = np.flatnonzero(j < 0)
-            absent = t - vs.seen
-            keep = (absent <= self.gap_s) | ((vs.seen - vs.since >= self.still_s) & (absent <= self.forget_s))
-            vs.pos = np.vstack([vs.pos[keep], uv[new]])
-            vs.n = np.r_[vs.n[keep], np.ones(len(new), np.int64)]
-            vs.since = np.r_[vs.since[keep], np.full(len(new), t)]
-            vs.seen = np.r_[vs.seen[keep], np.full(len(new), t)]
+            pos, n, since, seen = self._view(c)
+            uv = np.asarray(v.uv, float).reshape(-1, 2)
+            j = self._matched[1][c] if same else _match(pos, since, uv, self.still_px, t, self.still_s)[0]
+            marks = np.ascontiguousarray(named[:, c]) if c < named.shape[1] else np.full(1, -1, np.int64)
+            self._state[c] = _learn(pos, n, since, seen, uv, j, marks.astype(np.int64), t, self.gap_s,
+                                    self.forget_s, self.still_s)
+        self._matched = ([], [])
+
+
+def warm_up() -> None:
+    """Compile the kernels (the first run on a machine) or load them from disk now, not on the
+    first live frame."""
+    pos, since = np.zeros((1, 2)), np.zeros(1)
+    j, _ = _match(pos, since, np.zeros((1, 2)), 0.5, 0.0, 2.0)
+    _learn(pos, np.ones(1, np.int64), since, since, np.zeros((1, 2)), j, np.full(1, -1, np.int64), 0.0, 0.25, 2.0, 2.0)
+
+
+@njit(cache=True)
+def _match(pos: np.ndarray, since: np.ndarray, uv: np.ndarray, radius: float, t: float,
+           still_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(N,) the position of pos (K, 2) px each blob uv (N, 2) px lies nearest, within radius
+    (-1: none), and (N,) bool: that position was still since (K,) s at least still_s before t."""
+    N, K = len(uv), len(pos)
+    j = np.full(N, -1, np.int64)
+    flag = np.zeros(N, np.bool_)
+    r2 = radius * radius
+    for i in range(N):
+        best = r2
+        for k in range(K):
+            du, dv = uv[i, 0] - pos[k, 0], uv[i, 1] - pos[k, 1]
+            d2 = du * du + dv * dv
+            if d2 <= best:
+                best, j[i] = d2, k
+        if j[i] >= 0:
+            flag[i] = t - since[j[i]] >= still_s
+    return j, flag
+
+
+@njit(cache=True)
+def _learn(pos: np.ndarray, n: np.ndarray, since: np.ndarray, seen: np.ndarray, uv: np.ndarray, j: np.ndarray,
+           marks: np.ndarray, t: float, gap_s: float, forget_s: float,
+           still_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One frame learnt: each blob uv (N, 2) px on its position j (N,) (-1: a new one) moves
+    that position's running mean and marks it seen at t; a blob some marker is named on (marks:
+    the named markers' blob indices, -1 = none) restarts its position's stillness; positions
+    gone longer than gap_s (learnt clutter: forget_s) are dropped. Returns the new (pos, n,
+    since, seen)."""
+    N, K = len(uv), len(pos)
+    used = np.zeros(N, np.bool_)
+    for b in marks:
+        if 0 <= b < N:
+            used[b] = True
+    pos, n, since, seen = pos.copy(), n.copy(), since.copy(), seen.copy()
+    n_new = 0
+    for i in range(N):
+        k = j[i]
+        if k < 0:
+            n_new += 1
+            continue
+        w = min(n[k], 50)
+        pos[k, 0] = (pos[k, 0] * w + uv[i, 0]) / (w + 1)
+        pos[k, 1] = (pos[k, 1] * w + uv[i, 1]) / (w + 1)
+        n[k] += 1
+        seen[k] = t
+        if used[i]:
+            since[k] = t  # a name uses it: a marker, not clutter
+    keep = np.zeros(K, np.bool_)
+    for k in range(K):
+        absent = t - seen[k]
+        keep[k] = absent <= gap_s or (seen[k] - since[k] >= still_s and absent <= forget_s)
+    M = int(keep.sum()) + n_new
+    pos2, n2, since2, seen2 = np.empty((M, 2)), np.empty(M, np.int64), np.empty(M), np.empty(M)
+    m = 0
+    for k in range(K):
+        if keep[k]:
+            pos2[m], n2[m], since2[m], seen2[m] = pos[k], n[k], since[k], seen[k]
+            m += 1
+    for i in range(N):
+        if j[i] < 0:
+            pos2[m, 0], pos2[m, 1], n2[m], since2[m], seen2[m] = uv[i, 0], uv[i, 1], 1, t, t
+            m += 1
+    return pos2, n2, since2, seen2

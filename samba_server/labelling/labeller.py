@@ -41,8 +41,9 @@ from samba_common.skeleton import MARKER_JOINT, N_MARKERS
 
 from ..triangulate import Triangulator
 from .blobs import median_rows, view_blobs
-from .clutter import StillBlobs
 from .blobs import warm_up as warm_up_blobs
+from .clutter import StillBlobs
+from .clutter import warm_up as warm_up_clutter
 from .elongation import blob_separation, jacobians, separation_3d
 from .identify import Hint, identify, right_of, score_labels, sized
 from .points import PointReconstructor, Points3D, PointsConfig, blob_votes
@@ -215,6 +216,7 @@ class Labeller:
         self.points = PointReconstructor(rig, triangulator or Triangulator(rig), self.config.points)
         self._still = StillBlobs(self.config.points.still_s, self.config.points.still_px)
         warm_up_blobs()
+        warm_up_clutter()
         self.stats = LabelStats()
         # the prior body (database mean); _body is the body the rules use: the prior at the size of the
         # first identification's shoulders, then the measured subject. With two cameras every point
