@@ -12,7 +12,8 @@ Packets join the pending frame whose anchor (first packet's corrected time) is w
 ``group_tolerance`` frame periods and which has no packet from that mote yet. A frame is
 emitted when every live mote has contributed, or at its deadline (arrival clock):
 ``anchor + tolerance + max_wait``. A mote silent for ``dead_after_ms`` or reported gone is
-not waited for, so a dead mote never stalls the stream. Packets for frames already emitted
+not waited for, so a dead mote never stalls the stream (a frame whose instant came before the
+report still waits for it up to its deadline: the mote's last packets may be behind it). Packets for frames already emitted
 are counted as late and dropped; a packet whose sequence number was already seen recently
 (``dedup_window`` packets of that mote) is counted as a duplicate and dropped.
 
@@ -293,11 +294,19 @@ class FrameSync:
         if not self._pending:
             return []
         alive = set(self.alive())
+        # a mote reported gone after a frame's instant is still waited for there, up to the
+        # frame's deadline: its last packets may be on their way behind the report (Zenoh
+        # delivers liveliness and data on separate paths; under load a mote's leave reached the
+        # server before its last packet, which was then dropped as late, and a replay that
+        # delivered them the other way round grouped that frame otherwise)
+        left = {m: g for m, g in self._gone.items()
+                if m in self.motes and self.now_ns - self.motes[m].last_arrival_ns <= self._dead}
         ready = 0
         # strictly in order: a complete frame never releases an older incomplete one early,
         # whose packets may still be on their way (network jitter larger than a frame period)
         for fr in self._pending:
-            if fr.anchor + self._tol + self._wait <= self.now_ns or alive <= fr.packets.keys():
+            wait = alive | {m for m, g in left.items() if g > fr.anchor}
+            if fr.anchor + self._tol + self._wait <= self.now_ns or wait <= fr.packets.keys():
                 ready += 1
             else:
                 break

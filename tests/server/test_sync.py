@@ -107,6 +107,33 @@ def test_mote_left_releases_waiting_frames():
     assert len(out) == 1 and out[0].complete and list(out[0].packets) == ["cam0"]
 
 
+def test_a_motes_last_packet_behind_its_leave_still_joins_its_frame():
+    """Zenoh delivers liveliness and data on separate paths: a mote that stops may be reported
+    gone before its last packet arrives. That packet still joins its frame (captured before the
+    leave, within the frame's deadline), and the frames are the same whichever comes first (a
+    replay republishes them in another order)."""
+    def run(leave_first: bool) -> list:
+        sync = FrameSync(SyncConfig(fps=FPS))
+        sync.mote_joined("cam0", T0)
+        sync.mote_joined("cam1", T0)
+        out = []
+        for k in range(3):
+            out += sync.push(SyncPacket("cam1", k, T0 + k * PERIOD, T0 + k * PERIOD + 1_000_000))
+            last = SyncPacket("cam0", k, T0 + k * PERIOD, T0 + k * PERIOD + 3_000_000)
+            if k == 2 and leave_first:
+                out += sync.mote_left("cam1", T0 + k * PERIOD + 1_500_000)
+                out += sync.mote_left("cam0", T0 + k * PERIOD + 2_000_000)
+            out += sync.push(last)
+        if not leave_first:
+            out += sync.mote_left("cam1", T0 + 2 * PERIOD + 3_500_000)
+            out += sync.mote_left("cam0", T0 + 2 * PERIOD + 4_000_000)
+        out += sync.flush()
+        assert sync.motes["cam0"].late == 0
+        return [sorted(f.packets) for f in out]
+
+    assert run(True) == run(False) == [["cam0", "cam1"]] * 3
+
+
 def test_duplicates_and_late_packets_are_counted():
     sync = FrameSync(SyncConfig(fps=FPS, max_wait_ms=2.0))
     sync.mote_joined("cam0", T0)
