@@ -13,9 +13,10 @@ Packets join the pending frame whose anchor (first packet's corrected time) is w
 emitted when every live mote has contributed, or at its deadline (arrival clock):
 ``anchor + tolerance + max_wait``. A mote silent for ``dead_after_ms`` or reported gone is
 not waited for, so a dead mote never stalls the stream (a frame whose instant came before the
-report still waits for it up to its deadline: the mote's last packets may be behind it). Packets for frames already emitted
-are counted as late and dropped; a packet whose sequence number was already seen recently
-(``dedup_window`` packets of that mote) is counted as a duplicate and dropped.
+report still waits for it up to its deadline: the mote's last packets may be behind it).
+Packets for frames already emitted are counted as late and dropped; a packet whose sequence
+number was already seen recently (``dedup_window`` packets of that mote) is counted as a
+duplicate and dropped.
 
 Clock drift (a mote's crystal running fast or slow, up to a few hundred ppm) is estimated per
 mote from the lower envelope of the delays over the last ``drift_window_s`` (see
