@@ -288,20 +288,23 @@ class FrameSync:
     # ------------------------------------------------------------------ internals
     def alive(self) -> list[str]:
         """Motes currently waited for: heard within ``dead_after_ms`` and not reported gone."""
-        return sorted(m for m, st in self.motes.items()
-                      if m not in self._gone and self.now_ns - st.last_arrival_ns <= self._dead)
+        return sorted(self._heard() - self._gone.keys())
+
+    def _heard(self) -> set[str]:
+        """Motes heard within ``dead_after_ms``."""
+        return {m for m, st in self.motes.items() if self.now_ns - st.last_arrival_ns <= self._dead}
 
     def _emit_ready(self) -> list[Frame]:
         if not self._pending:
             return []
-        alive = set(self.alive())
+        heard = self._heard()
+        alive = heard - self._gone.keys()
         # a mote reported gone after a frame's instant is still waited for there, up to the
         # frame's deadline: its last packets may be on their way behind the report (Zenoh
         # delivers liveliness and data on separate paths; under load a mote's leave reached the
         # server before its last packet, which was then dropped as late, and a replay that
         # delivered them the other way round grouped that frame otherwise)
-        left = {m: g for m, g in self._gone.items()
-                if m in self.motes and self.now_ns - self.motes[m].last_arrival_ns <= self._dead}
+        left = {m: self._gone[m] for m in heard & self._gone.keys()}
         ready = 0
         # strictly in order: a complete frame never releases an older incomplete one early,
         # whose packets may still be on their way (network jitter larger than a frame period)

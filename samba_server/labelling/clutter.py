@@ -70,7 +70,7 @@ class StillBlobs:
             pos, n, since, seen = self._view(c)
             uv = np.asarray(v.uv, float).reshape(-1, 2)
             j = self._matched[1][c] if same else _match(pos, since, uv, self.still_px, t, self.still_s)[0]
-            marks = np.ascontiguousarray(named[:, c], np.int64) if c < named.shape[1] else np.full(1, -1, np.int64)
+            marks = np.ascontiguousarray(named[:, c], np.int64)
             self._state[c] = _learn(pos, n, since, seen, uv, j, marks, t, self.gap_s, self.forget_s, self.still_s)
         self._matched = ([], [])
 
