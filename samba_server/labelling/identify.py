@@ -99,9 +99,13 @@ def _unit2(v: np.ndarray) -> np.ndarray | None:
     return None if n < 1e-6 else np.array([v[0], v[1]]) / n
 
 
+#: m an ankle may lie above its knee (a shin held level: a leg raised behind, a kick)
+ANKLE_ABOVE_M = 0.1
+
+
 def _ankle_above_knee(X: np.ndarray, k: int, a: int) -> bool:
-    """Ankle point a lies more than 10 cm above knee point k: not one leg."""
-    return bool(X[a, 2] > X[k, 2] + 0.1)
+    """Ankle point a lies more than ANKLE_ABOVE_M above knee point k: not one leg."""
+    return bool(X[a, 2] > X[k, 2] + ANKLE_ABOVE_M)
 
 
 def _distances(X: np.ndarray, idx: list[int]) -> np.ndarray:

@@ -45,7 +45,7 @@ from .blobs import warm_up as warm_up_blobs
 from .clutter import StillBlobs
 from .clutter import warm_up as warm_up_clutter
 from .elongation import blob_separation, jacobians, separation_3d
-from .identify import Hint, identify, right_of, score_labels, sized
+from .identify import ANKLE_ABOVE_M, Hint, Hypothesis, identify, right_of, score_labels, sized
 from .points import PointReconstructor, Points3D, PointsConfig, blob_votes
 from .rigid import LA, LEVEL_M, LK, LS, LW, RA, RK, RS, RW, SIDES, Body
 
@@ -523,9 +523,10 @@ class Labeller:
             if t - self._t_good <= self.config.lost_after:
                 audited = self._audit(pts, out, assign, q, t)
                 if audited is not None:
-                    out, q = audited
-                    # an audit that only adds names keeps the tracks; one that renames restarts them
-                    self._update(out, t, reset=q.mode == "identified", shared=self._shared)
+                    out, q, kept = audited
+                    # an audit that only adds names keeps the tracks; one that renames restarts
+                    # them (an unclear one, all but the names it kept)
+                    self._update(out, t, reset=q.mode == "identified", shared=self._shared, kept=kept)
                     return out, q
                 self._update(out, t, shared=self._shared)
                 return out, q
@@ -1019,8 +1020,8 @@ class Labeller:
 
     def _recover_leg(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray) -> None:
         """A leg with neither knee nor ankle named while the other leg has a name is found again
-        as the only pair of free points that fits it: a shin apart, the knee above the ankle,
-        within the rigid distances of the named markers (the same side's shoulder) and not
+        as the only pair of free points that fits it: a shin apart, the knee above the ankle
+        (a level shin's ends by :meth:`_one_fit`), within the rigid distances of the named markers (the same side's shoulder) and not
         crossed over the other leg (by ``crossed_m`` along the subject's right). The solver,
         with no marker on that leg, predicts it wherever its pose prior puts it (a subject
         bending to scoop something up had a leg predicted lifted, 0.5 m off, for a second),
@@ -1050,9 +1051,10 @@ class Labeller:
                 trial[k], trial[a] = knee, ankle
                 if not body.violations(trial):
                     fits.append((i, j))
-            if len(fits) == 1:
+            fit = self._one_fit(pts, fits, (k, a))
+            if fit is not None:
                 log.debug("t=%.3f s: leg %d-%d found again as the one pair of points that fits it", self._t_frame, k, a)
-                _name_points(assign, arow, row_pt, (k, a), fits[0])
+                _name_points(assign, arow, row_pt, (k, a), fit)
 
     def _recover_ends(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray) -> None:
         """Both ankles unnamed, both knees named (or the other way round): the feet close
@@ -1100,9 +1102,11 @@ class Labeller:
         """Both legs unnamed, the upper body named (after a blackout the identification can
         leave the legs of a subject climbing down out: named by no prediction, no anchor): the
         legs are found again as the only two disjoint pairs of free points that each fit a leg
-        (a shin apart, knee above ankle, within the rigid distances of the named markers), the
-        left leg the one whose knee is to the subject's left, by at least ``crossed_m`` (knees
-        side by side or crossed leave it unclear: nothing is named). assign, arow (8,) in place; right (3,) the subject's right."""
+        (a shin apart, knee above ankle or the shin level, within the rigid distances of the
+        named markers), the left leg the one whose knee is to the subject's left, by at least
+        ``crossed_m`` (knees side by side or crossed leave it unclear: nothing is named); a
+        level shin's ends by :meth:`_one_fit`. assign, arow (8,) in place; right (3,) the
+        subject's right."""
         body = self._body
         named, pairs = self._free_shins(pts, assign)
         fits = []
@@ -1119,19 +1123,44 @@ class Labeller:
                 trial[[LK, LA, RK, RA]] = pts.X[[lk, la, rk, ra]]
                 if not body.violations(trial):
                     fits.append((lk, la, rk, ra))
-        if len(fits) == 1:
+        fit = self._one_fit(pts, fits, (LK, LA, RK, RA))
+        if fit is not None:
             log.debug("t=%.3f s: both legs found again as the one pair of shins that fits them", self._t_frame)
-            _name_points(assign, arow, row_pt, (LK, LA, RK, RA), fits[0])
+            _name_points(assign, arow, row_pt, (LK, LA, RK, RA), fit)
+
+    def _one_fit(self, pts: Points3D, fits: list[tuple[int, ...]], markers: tuple[int, ...]) -> tuple[int, ...] | None:
+        """The fit to name a leg's or both legs' markers (knee, ankle[, knee, ankle]) by: fits
+        (point per marker) that all put the same points on the same legs, differing only in
+        which end of a level shin is the knee (:meth:`_free_shins`), make one; of them, the one
+        nearest the markers' tracks named within ``track_timeout`` (else the knees highest).
+        Case, seed 636 005_16: a dancer's leg whipped back level (ankle 8 cm above the knee,
+        the feet 10-25 cm a frame) outran every leg's gate; found again with the knee taken as
+        the higher end, the knee and ankle were swapped for 0.4 s. None when the fits differ in
+        their points, or there are none."""
+        legs = {tuple(frozenset(f[i:i + 2]) for i in range(0, len(f), 2)) for f in fits}
+        if len(legs) != 1:
+            return None
+        if len(fits) == 1:
+            return fits[0]
+        m = np.array(markers)
+        age = self._t_frame - self._seen[m]
+        recent = (age <= self.config.track_timeout) & np.isfinite(self._pos[m]).all(axis=1)
+        if recent.any():
+            pred = self._pos[m] + self._vel[m] * age[:, None]
+            return min(fits, key=lambda f: float(np.linalg.norm(pts.X[list(f)] - pred, axis=1)[recent].sum()))
+        return max(fits, key=lambda f: float(sum(pts.X[f[i], 2] - pts.X[f[i + 1], 2] for i in range(0, len(f), 2))))
 
     def _free_shins(self, pts: Points3D, assign: np.ndarray) -> tuple[np.ndarray, list[tuple[int, int]]]:
         """The named markers (8, 3) (NaN = unnamed) and the (knee, ankle) candidates among the
         points nobody took (assign (8,): point per marker, -1 = none): pairs of point indices a
-        shin apart (within the tolerance), the knee above. Few, so clutter costs little."""
+        shin apart (within the tolerance), the knee above, or below by at most
+        ``ANKLE_ABOVE_M`` (a shin held level comes both ways round). Few, so clutter costs
+        little."""
         free = _unnamed(len(pts), assign)
         named = _named_on(pts, assign)
         X = pts.X[free]
         shin_ok = (np.abs(np.linalg.norm(X[:, None] - X[None], axis=2) - self._body.shin) <= self._body.tol) & \
-            (X[:, None, 2] > X[None, :, 2])
+            (X[:, None, 2] > X[None, :, 2] - ANKLE_ABOVE_M)
         return named, [(int(free[i]), int(free[j])) for i, j in zip(*np.nonzero(shin_ok))]
 
     def _swap_for_shins(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray | None) -> None:
@@ -1410,7 +1439,7 @@ class Labeller:
             residual <= self.config.audit_fit_m
 
     def _audit(self, pts: Points3D, tracked_out: np.ndarray, assign: np.ndarray, q: LabelQuality,
-               t: float) -> tuple[np.ndarray, LabelQuality] | None:
+               t: float) -> tuple[np.ndarray, LabelQuality, np.ndarray | None] | None:
         """Check the tracked names of this frame against a fresh identification, every
         ``audit_interval`` s while a point that is surely a marker (>= 3 views, or no view
         missing it) and not a static reflection stays unnamed: tracking that went wrong (a
@@ -1422,8 +1451,11 @@ class Labeller:
         it), or names >= 2 more markers where the tracked names lack a shoulder (as many, naming
         both shoulders, when one has been unnamed ``audit_shoulder_lost_s``); never one that
         moves >= 2 tracked names (naming < 2 more) the solver fitted well (:meth:`_fitted`).
+        An unclear identification (margin < ``min_margin``) is judged the same way, but replaces
+        only the names its close rivals agree on (:meth:`_agreed`).
         tracked_out: (8, 3) the tracked names; assign: (8,) their points (-1 = unnamed). Returns
-        (8, 3) markers and quality, or None."""
+        (8, 3) markers, quality and (8,) bool the markers whose tracks go on (None: all
+        restart), or None."""
         cfg = self.config
         free = _unnamed(len(pts), assign)
         free = free[(pts.n_views[free] >= 3) | (pts.unexplained[free] == 0)]
@@ -1448,11 +1480,15 @@ class Labeller:
         if not hyps:
             return None
         best = hyps[0]
+        margin = _margin(best.labels, best.score, hyps[1:])
+        unclear = margin < cfg.min_margin
+        if unclear:
+            best = self._agreed(hyps, assign)
+            if best is None:
+                return None
+            margin = max(0.0, _margin(best.labels, best.score, hyps[1:]))
         extends = not (_disputed(assign, [best]) & (assign >= 0)).any()
         if extends and np.count_nonzero(best.labels >= 0) <= np.count_nonzero(assign >= 0):
-            return None
-        margin = _margin(best.labels, best.score, hyps[1:])
-        if margin < cfg.min_margin:
             return None
         tracked = score_labels(pts.X, trust, self._body, hint, assign, pts.merged_all)
         # names moved from the point tracking gave them to another one, without naming two more
@@ -1488,9 +1524,40 @@ class Labeller:
             keep = np.isfinite(tracked_out).all(axis=1)
             out[keep] = tracked_out[keep]
             q.n_labelled = int(np.isfinite(out).all(axis=1).sum())
-            return out, q
+            return out, q, keep
+        kept = None
+        if unclear:  # the names it kept from tracking stay as tracked, and so do their tracks
+            kept = (best.labels == assign) & (assign >= 0)
+            out[kept] = tracked_out[kept]
         return out, LabelQuality(int(np.count_nonzero(best.labels >= 0)), len(pts), 0.1 * margin, 0.0,
-                                 "identified", 0)
+                                 "identified", 0), kept
+
+    def _agreed(self, hyps: list, assign: np.ndarray) -> Hypothesis | None:
+        """An unclear audit's labelling (the best of hyps scores less than ``min_margin`` over a
+        rival): the names every hypothesis within ``min_margin`` of the best agrees on, but
+        none on a point a tracked name keeps; for the other markers (disputed, or left unnamed:
+        an unclear look drops no name) the tracked names assign (8,) (-1 = unnamed). With the
+        best's score (how much a fresh look beats the tracking); None when that labelling is
+        the tracked one. Case, seed 635 002_04 (knees merged in
+        three views): the hidden right ankle was tracked onto the right knee's point, the knee
+        unnamed; when the ankle's own point came back (4 views), every close identification
+        named it there but the knees' order was unclear (margin 0.4), and the ankle stayed on
+        the knee's point for 0.7 s."""
+        best = hyps[0]
+        close = [h for h in hyps[1:] if best.score - h.score < self.config.min_margin]
+        labels = best.labels.copy()
+        disputed = _disputed(best.labels, close)
+        labels[disputed] = -1
+        keep = (labels < 0) & (assign >= 0) & ~np.isin(assign, labels[labels >= 0])
+        labels[keep] = assign[keep]
+        for m in np.flatnonzero((assign >= 0) & (labels < 0)):
+            # a tracked name's point given to another marker goes back to it (a dancer's hand on
+            # her knee: the wrist was named on the knee's point, the knee left unnamed, the legs
+            # then named swapped for 1.5 s by the backward pass, 636 005_06)
+            for n in np.flatnonzero((labels == assign[m]) & (assign != assign[m])):
+                labels[n] = assign[n] if assign[n] >= 0 and not np.isin(assign[n], labels).any() else -1
+            labels[m] = assign[m]
+        return None if np.array_equal(labels, assign) else Hypothesis(labels, best.score, best.facing)
 
     def _moving(self, X: np.ndarray, t: float) -> np.ndarray:
         """(F,) bool per free sure point X (F, 3): not a static reflection, i.e. not within 2 cm
@@ -1749,18 +1816,21 @@ class Labeller:
         self._steady = (since, t, X)
         return since
 
-    def _update(self, out: np.ndarray, t: float, reset: bool = False, shared: np.ndarray | None = None) -> None:
+    def _update(self, out: np.ndarray, t: float, reset: bool = False, shared: np.ndarray | None = None,
+                kept: np.ndarray | None = None) -> None:
         """Move the tracks to the named markers out (8, 3); shared (8,) bool: markers placed
-        either side of a merged point, whose positions are partly a guess."""
+        either side of a merged point, whose positions are partly a guess. reset: the names
+        are new, the tracks restart (but those of kept (8,) bool, when given)."""
         named = np.isfinite(out).all(axis=1)
         fresh = self._legs_fresh(out, named, t, reset)
         if reset:
             self._reset_timers()
             self._t_identified = t
-            self._pos[:] = np.nan
-            self._seen[:] = -np.inf
-            self._vel[:] = 0.0
-            self._on_point[:] = -np.inf
+            restart = np.ones(N_MARKERS, bool) if kept is None else ~kept
+            self._pos[restart] = np.nan
+            self._seen[restart] = -np.inf
+            self._vel[restart] = 0.0
+            self._on_point[restart] = -np.inf
         self._on_point[named & ~self._rescued] = t
         for m in np.flatnonzero(named):
             dt = t - self._seen[m]
