@@ -1021,11 +1021,11 @@ class Labeller:
     def _recover_leg(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray) -> None:
         """A leg with neither knee nor ankle named while the other leg has a name is found again
         as the only pair of free points that fits it: a shin apart, the knee above the ankle
-        (a level shin's ends by :meth:`_one_fit`), within the rigid distances of the named markers (the same side's shoulder) and not
-        crossed over the other leg (by ``crossed_m`` along the subject's right). The solver,
-        with no marker on that leg, predicts it wherever its pose prior puts it (a subject
-        bending to scoop something up had a leg predicted lifted, 0.5 m off, for a second),
-        so its prediction is not asked; either point may be one a view misses (legs hide each
+        (a level shin's ends by :meth:`_one_fit`), within the rigid distances of the named
+        markers (the same side's shoulder) and not crossed over the other leg (by
+        ``crossed_m`` along the subject's right). The solver, with no marker on that leg,
+        predicts it wherever its pose prior puts it (a subject bending to scoop something up
+        had a leg predicted lifted, 0.5 m off, for a second), so its prediction is not asked; either point may be one a view misses (legs hide each
         other). With two cameras every point is a 2-view point and ghosts pair up as easily as
         legs (the 2-camera benchmark lost 15 points on a jump take): the rule needs three.
         assign, arow (8,) in place; nothing before the facing is known."""
@@ -1538,11 +1538,10 @@ class Labeller:
         none on a point a tracked name keeps; for the other markers (disputed, or left unnamed:
         an unclear look drops no name) the tracked names assign (8,) (-1 = unnamed). With the
         best's score (how much a fresh look beats the tracking); None when that labelling is
-        the tracked one. Case, seed 635 002_04 (knees merged in
-        three views): the hidden right ankle was tracked onto the right knee's point, the knee
-        unnamed; when the ankle's own point came back (4 views), every close identification
-        named it there but the knees' order was unclear (margin 0.4), and the ankle stayed on
-        the knee's point for 0.7 s."""
+        the tracked one. Case, seed 635 002_04 (knees merged in three views): the hidden right
+        ankle was tracked onto the right knee's point, the knee unnamed; when the ankle's own
+        point came back (4 views), every close identification named it there but the knees'
+        order was unclear (margin 0.4), and the ankle stayed on the knee's point for 0.7 s."""
         best = hyps[0]
         close = [h for h in hyps[1:] if best.score - h.score < self.config.min_margin]
         labels = best.labels.copy()
