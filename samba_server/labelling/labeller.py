@@ -1549,13 +1549,17 @@ class Labeller:
         labels[disputed] = -1
         keep = (labels < 0) & (assign >= 0) & ~np.isin(assign, labels[labels >= 0])
         labels[keep] = assign[keep]
-        for m in np.flatnonzero((assign >= 0) & (labels < 0)):
-            # a tracked name's point given to another marker goes back to it (a dancer's hand on
-            # her knee: the wrist was named on the knee's point, the knee left unnamed, the legs
-            # then named swapped for 1.5 s by the backward pass, 636 005_06)
-            for n in np.flatnonzero((labels == assign[m]) & (assign != assign[m])):
-                labels[n] = assign[n] if assign[n] >= 0 and not np.isin(assign[n], labels).any() else -1
-            labels[m] = assign[m]
+        for _ in range(N_MARKERS):  # (a marker moved back may leave another unnamed: again)
+            lost = np.flatnonzero((assign >= 0) & (labels < 0))
+            if not lost.size:
+                break
+            for m in lost:
+                # a tracked name's point given to another marker goes back to it (a dancer's
+                # hand on her knee: the wrist was named on the knee's point, the knee left
+                # unnamed, the legs then named swapped for 1.5 s by the backward pass, 636 005_06)
+                for n in np.flatnonzero((labels == assign[m]) & (assign != assign[m])):
+                    labels[n] = assign[n] if assign[n] >= 0 and not np.isin(assign[n], labels).any() else -1
+                labels[m] = assign[m]
         return None if np.array_equal(labels, assign) else Hypothesis(labels, best.score, best.facing)
 
     def _moving(self, X: np.ndarray, t: float) -> np.ndarray:

@@ -1983,6 +1983,11 @@ def test_an_unclear_audit_gives_no_tracked_names_point_to_another_marker():
     free[RK] = -1
     got = lab._agreed(hyps, free)
     assert got is not None and got.labels.tolist() == [4, 7, 3, 6, 2, -1, 1, 0]
+    # a chain: the left wrist onto the right wrist's point, that one onto the right knee's;
+    # giving the knee its point back leaves the right wrist unnamed, which gets its own back
+    chain = [Hypothesis(np.array([0, 1, 3, 4, -1, -1, 5, -1]), 8.0, f),
+             Hypothesis(np.array([0, 1, 3, 4, -1, -1, 6, -1]), 7.9, f)]
+    assert lab._agreed(chain, np.array([0, 1, 2, 3, -1, 4, -1, -1])) is None
 
 
 #: two traced frames of a rendered take (swordplay, 002_07, on another body, seed 601), the first
