@@ -922,7 +922,7 @@ class Labeller:
         (:meth:`_recover_ends`). assign, arow (8,) in place."""
         cfg = self.config
         body = self._body
-        self._recover_leg(pts, assign, arow, row_pt)
+        self._recover_leg(pts, pred, assign, arow, row_pt)
         self._recover_ends(pts, assign, arow, row_pt)
         named = _named_on(pts, assign)
         lost = np.flatnonzero(assign < 0)
@@ -1018,23 +1018,26 @@ class Labeller:
             named[m] = pts.X[p]
             _name_points(assign, arow, row_pt, (m,), (p,))
 
-    def _recover_leg(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray) -> None:
+    def _recover_leg(self, pts: Points3D, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
+                     row_pt: np.ndarray) -> None:
         """A leg with neither knee nor ankle named while the other leg has a name is found again
         as the only pair of free points that fits it: a shin apart, the knee above the ankle
         (a level shin's ends by :meth:`_one_fit`), within the rigid distances of the named
         markers (the same side's shoulder) and not crossed over the other leg (by
         ``crossed_m`` along the subject's right). The solver, with no marker on that leg,
         predicts it wherever its pose prior puts it (a subject bending to scoop something up
-        had a leg predicted lifted, 0.5 m off, for a second), so its prediction is not asked; either point may be one a view misses (legs hide each
-        other). With two cameras every point is a 2-view point and ghosts pair up as easily as
-        legs (the 2-camera benchmark lost 15 points on a jump take): the rule needs three.
-        assign, arow (8,) in place; nothing before the facing is known."""
+        had a leg predicted lifted, 0.5 m off, for a second), so its prediction is not asked
+        (but for a level shin's ends, from tracks); either point may be one a view misses (legs
+        hide each other). With two cameras every point is a 2-view point and ghosts pair up as
+        easily as legs (the 2-camera benchmark lost 15 points on a jump take): the rule needs
+        three. pred: (8, 3) m the markers' predictions; assign, arow (8,) in place; nothing
+        before the facing is known."""
         if self._facing is None or len(self.rig) < 3:
             return
         body = self._body
         right = right_of(self._facing)
         if (assign[[LK, LA, RK, RA]] < 0).all() and (assign[[LS, RS]] >= 0).any():
-            self._recover_legs(pts, assign, arow, row_pt, right)
+            self._recover_legs(pts, pred, assign, arow, row_pt, right)
             return
         for (_s, _w, k, a), (_os, _ow, ok, oa) in ((SIDES[0], SIDES[1]), (SIDES[1], SIDES[0])):
             if assign[k] >= 0 or assign[a] >= 0 or (assign[ok] < 0 and assign[oa] < 0):
@@ -1051,7 +1054,7 @@ class Labeller:
                 trial[k], trial[a] = knee, ankle
                 if not body.violations(trial):
                     fits.append((i, j))
-            fit = self._one_fit(pts, fits, (k, a))
+            fit = self._one_fit(pts, pred, fits, (k, a))
             if fit is not None:
                 log.debug("t=%.3f s: leg %d-%d found again as the one pair of points that fits it", self._t_frame, k, a)
                 _name_points(assign, arow, row_pt, (k, a), fit)
@@ -1097,7 +1100,7 @@ class Labeller:
             log.debug("t=%.3f s: markers %s found again on the points that fit the shins", self._t_frame, ends)
             _name_points(assign, arow, row_pt, ends, (int(free[i]), int(free[j])))
 
-    def _recover_legs(self, pts: Points3D, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray,
+    def _recover_legs(self, pts: Points3D, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray, row_pt: np.ndarray,
                       right: np.ndarray) -> None:
         """Both legs unnamed, the upper body named (after a blackout the identification can
         leave the legs of a subject climbing down out: named by no prediction, no anchor): the
@@ -1105,8 +1108,8 @@ class Labeller:
         (a shin apart, knee above ankle or the shin level, within the rigid distances of the
         named markers), the left leg the one whose knee is to the subject's left, by at least
         ``crossed_m`` (knees side by side or crossed leave it unclear: nothing is named); a
-        level shin's ends by :meth:`_one_fit`. assign, arow (8,) in place; right (3,) the
-        subject's right."""
+        level shin's ends by :meth:`_one_fit`. pred (8, 3) m: the markers' predictions;
+        assign, arow (8,) in place; right (3,) the subject's right."""
         body = self._body
         named, pairs = self._free_shins(pts, assign)
         fits = []
@@ -1123,16 +1126,18 @@ class Labeller:
                 trial[[LK, LA, RK, RA]] = pts.X[[lk, la, rk, ra]]
                 if not body.violations(trial):
                     fits.append((lk, la, rk, ra))
-        fit = self._one_fit(pts, fits, (LK, LA, RK, RA))
+        fit = self._one_fit(pts, pred, fits, (LK, LA, RK, RA))
         if fit is not None:
             log.debug("t=%.3f s: both legs found again as the one pair of shins that fits them", self._t_frame)
             _name_points(assign, arow, row_pt, (LK, LA, RK, RA), fit)
 
-    def _one_fit(self, pts: Points3D, fits: list[tuple[int, ...]], markers: tuple[int, ...]) -> tuple[int, ...] | None:
+    def _one_fit(self, pts: Points3D, pred: np.ndarray, fits: list[tuple[int, ...]],
+                 markers: tuple[int, ...]) -> tuple[int, ...] | None:
         """The fit to name a leg's or both legs' markers (knee, ankle[, knee, ankle]) by: fits
         (point per marker) that all put the same points on the same legs, differing only in
         which end of a level shin is the knee (:meth:`_free_shins`), make one; of them, the one
-        nearest the markers' tracks named within ``track_timeout`` (else the knees highest).
+        nearest the markers' predictions pred (8, 3) m from tracks named within
+        ``track_timeout`` (else the knees highest).
         Case, seed 636 005_16: a dancer's leg whipped back level (ankle 8 cm above the knee,
         the feet 10-25 cm a frame) outran every leg's gate; found again with the knee taken as
         the higher end, the knee and ankle were swapped for 0.4 s. None when the fits differ in
@@ -1143,11 +1148,9 @@ class Labeller:
         if len(fits) == 1:
             return fits[0]
         m = np.array(markers)
-        age = self._t_frame - self._seen[m]
-        recent = (age <= self.config.track_timeout) & np.isfinite(self._pos[m]).all(axis=1)
+        recent = (self._t_frame - self._seen[m] <= self.config.track_timeout) & np.isfinite(pred[m]).all(axis=1)
         if recent.any():
-            pred = self._pos[m] + self._vel[m] * age[:, None]
-            return min(fits, key=lambda f: float(np.linalg.norm(pts.X[list(f)] - pred, axis=1)[recent].sum()))
+            return min(fits, key=lambda f: float(np.linalg.norm(pts.X[list(f)] - pred[m], axis=1)[recent].sum()))
         return max(fits, key=lambda f: float(sum(pts.X[f[i], 2] - pts.X[f[i + 1], 2] for i in range(0, len(f), 2))))
 
     def _free_shins(self, pts: Points3D, assign: np.ndarray) -> tuple[np.ndarray, list[tuple[int, int]]]:
