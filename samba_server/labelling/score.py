@@ -21,7 +21,12 @@ import numpy as np
 from samba_common.skeleton import MARKER_JOINT
 from samba_server.recon.bounds import CONFIDENT_M
 
-__all__ = ["TakeScore", "separable_visible", "score_take"]
+__all__ = ["TELEPORT_M_S", "TELEPORT_S", "TakeScore", "separable_visible", "score_take", "teleports"]
+
+#: a true marker faster than this between two frames (m/s) teleported: the source's glitch
+TELEPORT_M_S = 12.0
+#: frames this long after a teleport (s) are counted as near it
+TELEPORT_S = 0.25
 
 
 @dataclass
@@ -41,7 +46,10 @@ class TakeScore:
     solved: share of frames outside blackouts with a pose; reacquire_s: per blackout, the time
     from the markers' return to the first frame with >= 6 markers named right (NaN if never);
     blackout_pose_s: the longest time into a blackout with a pose still output; mpjpe_m: mean
-    joint error of the solved motion frames.
+    joint error of the solved motion frames; near_teleport: scored frames not all right within
+    :data:`TELEPORT_S` after a *teleport* of the ground truth (a true marker moving faster than
+    :data:`TELEPORT_M_S` between two frames: no body does; the source clip's own glitches, e.g.
+    CMU subject 005's right knee swinging 30-45 cm about the hip-ankle line in one frame).
     """
 
     frames: int = 0
@@ -55,6 +63,7 @@ class TakeScore:
     reacquire_s: list[float] = field(default_factory=list)
     blackout_pose_s: float = 0.0
     mpjpe_m: float = float("nan")
+    near_teleport: int = 0
 
 
 def separable_visible(uv: np.ndarray, visible: np.ndarray, radius: np.ndarray, gap_px: float = 1.0) -> np.ndarray:
@@ -68,6 +77,13 @@ def separable_visible(uv: np.ndarray, visible: np.ndarray, radius: np.ndarray, g
     touch[:, :, idx, idx] = False
     apart = visible & ~touch.any(axis=3)
     return apart.sum(axis=0) >= 2
+
+
+def teleports(truth: np.ndarray, fps: float) -> np.ndarray:
+    """(F,) bool: frames whose true markers truth (F, 8, 3) m, one or more, moved faster than
+    :data:`TELEPORT_M_S` since the frame before (the first frame: False)."""
+    step = np.linalg.norm(np.diff(truth, axis=0), axis=2) * fps  # (F-1, 8) m/s
+    return np.r_[False, (np.nan_to_num(step) > TELEPORT_M_S).any(axis=1)]
 
 
 def score_take(markers: np.ndarray, joints: np.ndarray, truth_joints: np.ndarray, visible: np.ndarray,
@@ -92,6 +108,8 @@ def score_take(markers: np.ndarray, joints: np.ndarray, truth_joints: np.ndarray
     if scored.any():
         s.correct = float(ok[scored].mean())
         s.wrong_frames = int((wrong.any(axis=1) & scored).sum())
+        after = np.convolve(teleports(truth, fps), np.ones(max(int(round(TELEPORT_S * fps)), 1)))[:len(ok)] > 0
+        s.near_teleport = int((~ok & scored & after).sum())
     outside = ~blackout
     s.solved = float(solved[outside].mean()) if outside.any() else float("nan")
     confident = solved & (named.sum(axis=1) >= 4)

@@ -33,3 +33,24 @@ def test_a_name_between_two_merged_markers_is_right_and_one_on_a_far_ghost_is_wr
     assert s.frames == 3
     assert s.wrong_frames == 1
     assert np.isclose(s.correct, 2 / 3)
+
+
+def test_frames_not_all_right_after_a_teleport_of_the_ground_truth_are_counted_apart():
+    """A walk whose right knee, in the truth itself, swings 35 cm in one frame at frame 30 and
+    back at frame 40 (CMU subject 005's glitch): the names that stay where the knee was for
+    frames 30-34 (wrong) count as frames after a teleport; a wrong wrist at frame 80, long after
+    the knee came back, and one at frame 20, before it jumped, do not."""
+    joints, _t = synthetic_motion(2.0, 60.0)
+    joints = joints[:100].copy()
+    knee = MARKER_JOINT[RK]
+    joints[30:40, knee] += [0.35, 0.0, 0.0]
+    truth = joints[:, list(MARKER_JOINT)]
+    named = truth.copy()
+    named[30:35, RK] = truth[29, RK]  # the name stays where the knee was
+    named[[20, 80], RW] += [0.0, 0.3, 0.0]
+    s = score_take(named, joints, joints, np.ones((100, 8), bool), np.zeros(100, bool), 60.0)
+    assert s.frames == 100 and s.wrong_frames == 7
+    assert s.near_teleport == 5
+    smooth = joints.copy()
+    smooth[30:40, knee] -= [0.35, 0.0, 0.0]
+    assert score_take(named, smooth, smooth, np.ones((100, 8), bool), np.zeros(100, bool), 60.0).near_teleport == 0
