@@ -92,6 +92,7 @@ class LabelConfig:
     split_legs_sigma_px: float = 0.5  #: the same for the two knees or the two ankles (inf: off; on by default: the hip width the subject is measured with comes from them) ...
     split_wrists_sigma_px: float = 0.5  #: the same for the two wrists (hands together), the sign from their tracks' separation (inf: off)
     split_legs_max_deg: float = 35.0  #: ... used only this close in direction to the guess (the subject's right): further off, the guess cannot tell which end is which
+    split_in_line_m: float = 0.06  #: two knees or ankles on one point whose tracks, named apart the frame before, predict them at least this far apart more than split_legs_max_deg off the subject's right (one before the other) are placed along those predictions
     split_share_s: float = 0.1  #: a knee and the other leg's ankle on one point are placed either side of it along their predictions for this long, then both on it (inf: always split)
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
@@ -1615,7 +1616,9 @@ class Labeller:
                 continue
             m, n = ms
             wrists = (m, n) == (LW, RW)
-            off = _guess_split(pred, m, n, cfg.merged_half_m, None if wrists else right)
+            legs = (m, n) in _LEG_PAIRS
+            in_line = legs and right is not None and self._in_line(m, n, pred, right)
+            off = _guess_split(pred, m, n, cfg.merged_half_m, None if wrists or in_line else right)
             if wrists and (off is None or len(self.rig) < 3):
                 lateral = _guess_split(pred, m, n, cfg.merged_half_m, right)
                 # (with right None the two guesses are one: lateral is None only when off is)
@@ -1624,7 +1627,6 @@ class Labeller:
                 continue
             if self._t_frame - self._sharing.get((m, n), self._t_frame) > cfg.split_share_s:
                 continue  # their predictions, split from this point for a while, say no more where they are
-            legs = (m, n) in _LEG_PAIRS
             if legs and right is not None and self._crossed_last(m, n, right):
                 self._renamed |= (1 << m) | (1 << n)  # named crossed, placed uncrossed: renamed
             measured = self._measured_split(pts, int(p), 2.0 * off, named,
@@ -1642,6 +1644,23 @@ class Labeller:
                 off = 0.5 * measured
             out[m] = out[m] + off
             out[n] = out[n] - off
+
+    def _in_line(self, m: int, n: int, pred: np.ndarray, right: np.ndarray) -> bool:
+        """Whether the two knees (or ankles) m, n, both named in the frame before and not crossed
+        there (:meth:`_crossed_last`: a pair the guess across the body uncrosses, a rename), are
+        predicted (pred (8, 3)) at least ``split_in_line_m`` apart in a direction more than
+        ``split_legs_max_deg`` off the subject's right (3,): one before the other, as in a step,
+        where the guess across the body would put both beside their merged point and leave which
+        is which to chance the next frame (a walk's ankles, 15 cm one before the other and merged
+        in every view for a frame, swapped there; 005_17 seed 638). Split so, their tracks stay
+        one before the other through a merge of several frames."""
+        if not (self._seen[[m, n]] >= self._t_prev - 1e-6).all() or self._crossed_last(m, n, right):
+            return False
+        apart = pred[m] - pred[n]
+        norm = float(np.linalg.norm(apart))
+        if not np.isfinite(norm) or norm < self.config.split_in_line_m:
+            return False
+        return abs(float(apart @ right)) / norm < math.cos(math.radians(self.config.split_legs_max_deg))
 
     def _crossed_last(self, m: int, n: int, right: np.ndarray) -> bool:
         """Whether the left marker m and the right one n were both named in the frame before,
