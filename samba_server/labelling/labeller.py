@@ -92,7 +92,7 @@ class LabelConfig:
     split_legs_sigma_px: float = 0.5  #: the same for the two knees or the two ankles (inf: off; on by default: the hip width the subject is measured with comes from them) ...
     split_wrists_sigma_px: float = 0.5  #: the same for the two wrists (hands together), the sign from their tracks' separation (inf: off)
     split_legs_max_deg: float = 35.0  #: ... used only this close in direction to the guess (the subject's right): further off, the guess cannot tell which end is which
-    split_in_line_m: float = 0.06  #: two knees or ankles on one point whose tracks, named apart the frame before, predict them at least this far apart more than split_legs_max_deg off the subject's right (one before the other) are placed along those predictions
+    split_in_line_m: float = 0.06  #: two knees or ankles on one point, named the frame before at least this far apart more than split_legs_max_deg off the subject's right (one before the other), uncrossed, are placed along that separation (inf: never)
     split_share_s: float = 0.1  #: a knee and the other leg's ankle on one point are placed either side of it along their predictions for this long, then both on it (inf: always split)
     split_prior_m: float = 0.10  #: how far (per axis) the measured separation may differ from the guess without moments
     split_min_views: int = 3  #: merged views needed to measure it (one says nothing along its ray)
@@ -248,6 +248,9 @@ class Labeller:
         #: (time, (8, 3) markers) of the last identification's best labelling
         self._best_prev: tuple[float, np.ndarray] | None = None
         self._shared = np.zeros(N_MARKERS, bool)
+        self._firm = np.zeros(N_MARKERS, bool)  # the frame before named the marker on a point of its own, not loose
+        self._lined: set[tuple[int, int]] = set()  # leg pairs split one before the other (_in_line) this frame
+        self._lined_prev: set[tuple[int, int]] = set()  # ... and the frame before
         self._together: dict[tuple[int, int], float] = {}  # (m, n) markers -> when they last shared a point
         self._sharing: dict[tuple[int, int], float] = {}  # a knee and the other ankle -> since when they share a point
         self._sharing_t = -np.inf  # the frame _sharing was last updated in
@@ -373,7 +376,9 @@ class Labeller:
         """Name the markers of one frame. packets: per camera (rig order) a MarkerPacket or None;
         t: seconds. Returns ((8, 3) world metres, NaN = not named; quality)."""
         self._renamed = 0
+        self._lined_prev, self._lined = self._lined, set()
         out, q = self._label(packets, t)
+        self._firm = np.isfinite(out).all(axis=1) & ~self.loose(out)
         self._still.update(self._views, self._blobs_of(out), t)
         q.renamed = self._renamed
         self.stats.renames += int(self._renamed != 0)
@@ -739,10 +744,12 @@ class Labeller:
         stands for, where two views each hold a blob near the marker's projection (a hand in front
         of the chest hidden from two cameras: the other two see it, but a point of the knee behind
         it, seen in three views, took its blob in one of them). The two blobs, at least one used
-        by no point, or both used by unnamed 2-view points only (two shoulders seen by the same
-        two cameras on one epipolar plane of theirs: the points stage paired each one's blob
-        with the other's, two ghosts 40-50 cm off, and both shoulders went unnamed), are
-        triangulated; the point is taken when it meets both rays within
+        by no point, or both used only by unnamed points that are 2-view (two shoulders seen by
+        the same two cameras on one epipolar plane of theirs: the points stage paired each one's
+        blob with the other's, two ghosts 40-50 cm off, and both shoulders went unnamed) or rough
+        (error over the points stage's ``rough_px``: a fencer's right shoulder's two blobs went
+        into a 3-view ghost 27 cm off, 0.58 px, with the left shoulder's blob in a third view;
+        002_08 seed 638), are triangulated; the point is taken when it meets both rays within
         ``rescue_px`` (a marker's own two blobs meet within 0.25 px; a blob pair that only
         happens to lie near the prediction mostly does not), lies within ``rescue_m`` of the
         prediction (plus ``rescue_growth`` times the time since the marker was last named: a
@@ -778,9 +785,9 @@ class Labeller:
         tri = self.points.tri
         proj, depth = tri.project(pred[todo])  # (C, M, 2) px, (C, M) m
         taken = [set(pts.blob[c][pts.blob[c] >= 0].tolist()) for c in range(C)]
-        # blobs held by a point other than an unnamed 2-view one (which may be the crossed
-        # pairing of two markers' blobs in the same two views: a ghost of each)
-        ghostly = pts.n_views == 2
+        # blobs held by a point other than an unnamed 2-view or rough one (which may be the
+        # crossed pairing of two markers' blobs in the same two views: a ghost of each)
+        ghostly = (pts.n_views == 2) | (pts.error > self.points.config.rough_px)
         ghostly[assign[assign >= 0]] = False
         held = [set(pts.blob[c][(pts.blob[c] >= 0) & ~ghostly].tolist()) for c in range(C)]
         found = 0
@@ -1617,8 +1624,10 @@ class Labeller:
             m, n = ms
             wrists = (m, n) == (LW, RW)
             legs = (m, n) in _LEG_PAIRS
-            in_line = legs and right is not None and self._in_line(m, n, pred, right)
-            off = _guess_split(pred, m, n, cfg.merged_half_m, None if wrists or in_line else right)
+            in_line = self._in_line(m, n, right) if legs and right is not None else None
+            off = in_line if in_line is not None else _guess_split(pred, m, n, cfg.merged_half_m, None if wrists else right)
+            if in_line is not None:
+                self._lined.add((m, n))
             if wrists and (off is None or len(self.rig) < 3):
                 lateral = _guess_split(pred, m, n, cfg.merged_half_m, right)
                 # (with right None the two guesses are one: lateral is None only when off is)
@@ -1645,22 +1654,30 @@ class Labeller:
             out[m] = out[m] + off
             out[n] = out[n] - off
 
-    def _in_line(self, m: int, n: int, pred: np.ndarray, right: np.ndarray) -> bool:
-        """Whether the two knees (or ankles) m, n, both named in the frame before and not crossed
-        there (:meth:`_crossed_last`: a pair the guess across the body uncrosses, a rename), are
-        predicted (pred (8, 3)) at least ``split_in_line_m`` apart in a direction more than
-        ``split_legs_max_deg`` off the subject's right (3,): one before the other, as in a step,
-        where the guess across the body would put both beside their merged point and leave which
-        is which to chance the next frame (a walk's ankles, 15 cm one before the other and merged
-        in every view for a frame, swapped there; 005_17 seed 638). Split so, their tracks stay
-        one before the other through a merge of several frames."""
-        if not (self._seen[[m, n]] >= self._t_prev - 1e-6).all() or self._crossed_last(m, n, right):
-            return False
-        apart = pred[m] - pred[n]
+    def _in_line(self, m: int, n: int, right: np.ndarray) -> np.ndarray | None:
+        """Half the separation (3,) m, at most ``merged_half_m``, of the two knees (or ankles)
+        m, n where they were named in the frame before, when both were named there on points of
+        their own that were not loose (:meth:`loose`; or split so by this rule), not crossed
+        (:meth:`_crossed_last`: a pair the split across the body uncrosses, a rename), at least
+        ``split_in_line_m`` apart in a direction more than ``split_legs_max_deg`` off the
+        subject's right (3,): one before the other, as in a step, where the guess across the body
+        would put both beside their merged point and leave which is which to chance the next
+        frame (a walk's ankles, 15 cm one before the other and merged in every view for a frame,
+        swapped there; 005_17 seed 638). Else None. Their named places, not the predictions:
+        velocities taken from rough points predicted a standard pose's merged knees one before
+        the other (006_02 seed 638); and only firm ones: knees side by side named on two
+        mirrored points 8 cm off, one before the other, were split so (002_04 seed 638). Split
+        so, the two stay one before the other through a merge of several frames."""
+        cfg = self.config
+        if not (self._seen[[m, n]] >= self._t_prev - 1e-6).all() or self._crossed_last(m, n, right) \
+                or not (self._firm[[m, n]].all() or (m, n) in self._lined_prev):
+            return None
+        apart = self._pos[m] - self._pos[n]
         norm = float(np.linalg.norm(apart))
-        if not np.isfinite(norm) or norm < self.config.split_in_line_m:
-            return False
-        return abs(float(apart @ right)) / norm < math.cos(math.radians(self.config.split_legs_max_deg))
+        if not np.isfinite(norm) or norm < cfg.split_in_line_m \
+                or abs(float(apart @ right)) / norm >= math.cos(math.radians(cfg.split_legs_max_deg)):
+            return None
+        return 0.5 * apart * min(1.0, 2.0 * cfg.merged_half_m / norm)
 
     def _crossed_last(self, m: int, n: int, right: np.ndarray) -> bool:
         """Whether the left marker m and the right one n were both named in the frame before,
