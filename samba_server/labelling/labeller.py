@@ -248,7 +248,7 @@ class Labeller:
         #: (time, (8, 3) markers) of the last identification's best labelling
         self._best_prev: tuple[float, np.ndarray] | None = None
         self._shared = np.zeros(N_MARKERS, bool)
-        self._firm = np.zeros(N_MARKERS, bool)  # the frame before named the marker on a point of its own, not loose
+        self._named_prev: tuple[np.ndarray, Points3D | None] = (np.full((N_MARKERS, 3), np.nan), None)  # the frame before's names and points
         self._lined: set[tuple[int, int]] = set()  # leg pairs split one before the other (_in_line) this frame
         self._lined_prev: set[tuple[int, int]] = set()  # ... and the frame before
         self._together: dict[tuple[int, int], float] = {}  # (m, n) markers -> when they last shared a point
@@ -378,7 +378,7 @@ class Labeller:
         self._renamed = 0
         self._lined_prev, self._lined = self._lined, set()
         out, q = self._label(packets, t)
-        self._firm = np.isfinite(out).all(axis=1) & ~self.loose(out)
+        self._named_prev = (out.copy(), self._pts)
         self._still.update(self._views, self._blobs_of(out), t)
         q.renamed = self._renamed
         self.stats.renames += int(self._renamed != 0)
@@ -386,9 +386,9 @@ class Labeller:
         self._named_last = bool(np.isfinite(out).all(axis=1).any())
         return out, q
 
-    def loose(self, markers: np.ndarray) -> np.ndarray:
-        """(8,) bool: the named markers of this frame's markers (8, 3) world m (NaN = not named)
-        whose position is rough: on a point that fewer than two views saw in a blob of its own
+    def loose(self, markers: np.ndarray, pts: Points3D | None = None) -> np.ndarray:
+        """(8,) bool: the named markers of this frame's markers (8, 3) world m (NaN = not named;
+        or of the frame whose points are pts) whose position is rough: on a point that fewer than two views saw in a blob of its own
         (in the others the blob was merged: the point may lie between two markers; 2 cm rms
         against 5 mm on the labelling benchmark), placed by reflection, twice the size of one
         marker everywhere, or named twice; or on no point at all (placed beside a merged point,
@@ -396,8 +396,8 @@ class Labeller:
         weighs them less (``sigma_loose``; :mod:`samba_server.both_ways`)."""
         named = np.isfinite(markers).all(axis=1)
         out = named.copy()
-        pts = self._pts
-        p, on = self._points_of(markers)
+        pts = self._pts if pts is None else pts
+        p, on = self._points_of(markers, pts)
         if not on.any():
             return out
         rough = (pts.n_views - pts.n_merged < 2) | pts.mirrored | pts.merged_all  # (P,)
@@ -447,10 +447,10 @@ class Labeller:
             out[np.linalg.norm(np.asarray(markers, float) - X, axis=1) <= 1e-6] = blobs
         return out
 
-    def _points_of(self, markers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(8,) this frame's point nearest each marker of markers (8, 3) m, and (8,) bool: the
-        marker is named on that point."""
-        pts = self._pts
+    def _points_of(self, markers: np.ndarray, pts: Points3D | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(8,) this frame's point (or pts') nearest each marker of markers (8, 3) m, and (8,)
+        bool: the marker is named on that point."""
+        pts = self._pts if pts is None else pts
         if pts is None or not len(pts):
             return np.zeros(N_MARKERS, np.int64), np.zeros(N_MARKERS, bool)
         d = np.linalg.norm(np.asarray(markers, float)[:, None, :] - pts.X[None], axis=2)  # (8, P)
@@ -1669,9 +1669,12 @@ class Labeller:
         mirrored points 8 cm off, one before the other, were split so (002_04 seed 638). Split
         so, the two stay one before the other through a merge of several frames."""
         cfg = self.config
-        if not (self._seen[[m, n]] >= self._t_prev - 1e-6).all() or self._crossed_last(m, n, right) \
-                or not (self._firm[[m, n]].all() or (m, n) in self._lined_prev):
+        if not (self._seen[[m, n]] >= self._t_prev - 1e-6).all() or self._crossed_last(m, n, right):
             return None
+        if (m, n) not in self._lined_prev:
+            named, pts = self._named_prev
+            if pts is None or not np.isfinite(named[[m, n]]).all() or self.loose(named, pts)[[m, n]].any():
+                return None
         apart = self._pos[m] - self._pos[n]
         norm = float(np.linalg.norm(apart))
         if not np.isfinite(norm) or norm < cfg.split_in_line_m \
