@@ -388,7 +388,8 @@ class Labeller:
 
     def loose(self, markers: np.ndarray, pts: Points3D | None = None) -> np.ndarray:
         """(8,) bool: the named markers of this frame's markers (8, 3) world m (NaN = not named;
-        or of the frame whose points are pts) whose position is rough: on a point that fewer than two views saw in a blob of its own
+        or of the frame whose points are pts) whose position is rough: on a point that fewer
+        than two views saw in a blob of its own
         (in the others the blob was merged: the point may lie between two markers; 2 cm rms
         against 5 mm on the labelling benchmark), placed by reflection, twice the size of one
         marker everywhere, or named twice; or on no point at all (placed beside a merged point,
@@ -1682,7 +1683,7 @@ class Labeller:
         if not np.isfinite(norm) or norm < cfg.split_in_line_m \
                 or abs(float(apart @ right)) / norm >= math.cos(math.radians(cfg.split_legs_max_deg)):
             return None
-        return 0.5 * apart * min(1.0, 2.0 * cfg.merged_half_m / norm)
+        return _guess_split(self._pos, m, n, cfg.merged_half_m, None)  # along the named places
 
     def _crossed_last(self, m: int, n: int, right: np.ndarray) -> bool:
         """Whether the left marker m and the right one n were both named in the frame before,
