@@ -141,7 +141,7 @@ class LabelConfig:
     steady_s: float = 0.05  #: ... or, with >= 3 cameras, once it has named the same markers at the same places (gate_m) this long (inf: never)
     audit_interval: float = 0.1  #: s: while tracking leaves a sure point unnamed, identify afresh this often (inf: never) ...
     audit_margin: float = 1.0  #: ... and take the identification when it scores this much more than the tracked names
-    audit_agree: float = 0.3  #: score, per marker, of agreeing with a tracked name in that identification
+    audit_agree: float = 0.3  #: score, per marker, of agreeing with a tracked name in that identification (or with where it was last named: recall_m)
     audit_extend_margin: float = 0.5  #: an identification that only adds names to the tracked ones needs this much more
     audit_move_margin: float = 2.0  #: ... and one that moves >= 2 tracked names to other points, naming < 2 more, this much ...
     audit_fit_m: float = 0.01  #: ... and never while the solver fits the tracked names within this (rms m; >= 3 cameras; 0: by score alone)
@@ -152,6 +152,8 @@ class LabelConfig:
     facing_turn_rate: float = 1.5  #: ... and free within this many rad/s since then (at most 90 degrees)
     first_facing: tuple[float, float] = (0.0, 1.0)  #: before any labelling the subject faces this way (x, y): the standard pose's +Y ...
     first_facing_weight: float = 1.0  #: ... with this weight
+    recall_m: float = 0.10  #: identifying afresh, a point this close to where a marker was last named ... (0: never)
+    recall_s: float = 2.0  #: ... at most this long ago counts as that marker (audit_agree): a subject still through a blackout
     time_reversed: bool = False  #: the take is labelled backwards in time (samba-process's second pass): the body travels the other way
     part_s: float = 0.3  #: a knee and the other leg's ankle that shared a merged point this recently and now part ...
     part_gain_m: float = 0.03  #: ... swap points when the shins fit this much better (m, both summed; inf: never)
@@ -656,14 +658,18 @@ class Labeller:
             # it from a stance turned against the shoulders (a dancer twisting against her
             # hips; a fencer), which is named so. The knees' hold decides (_uncross_knees).
             # With three cameras or more (measured there; with two the rule stays as it was)
+            # (a marker on a point that may lie between two markers has no shin to go by:
+            # _between; a kneeling child's hidden knees on such points uncrossed her ankles,
+            # crossed and named right, for the last 1.6 s of the take: seed 3 005_12 at x0.75)
             if len(crossed) == 1 or (crossed and len(self.rig) < 3):
-                swapped = out.copy()
+                firm = np.where(_between(pts, assign)[:, None], np.nan, out)
+                swapped = firm.copy()
                 for lm, rm in crossed:
-                    swapped[[lm, rm]] = out[[rm, lm]]
+                    swapped[[lm, rm]] = firm[[rm, lm]]
                 slack = 0.02 if any(stale[m] for pair in crossed for m in pair) else -0.005
-                if slack < 0 and len(self.rig) >= 3 and not np.isfinite(out[[LK, RK, LA, RA]]).all():
+                if slack < 0 and len(self.rig) >= 3 and not np.isfinite(firm[[LK, RK, LA, RA]]).all():
                     slack = -cfg.cross_gain_m
-                if self._body.shin_misfit(swapped) <= self._body.shin_misfit(out) + slack:
+                if self._body.shin_misfit(swapped) <= self._body.shin_misfit(firm) + slack:
                     log.debug("t=%.3f s: %s uncrossed", t, crossed)
                     for lm, rm in crossed:
                         self._renamed |= (1 << lm) | (1 << rm)
@@ -1185,9 +1191,14 @@ class Labeller:
         both: a swap of the ankles breaks one shin only; >= 3 cameras). Swapping the knees or
         the ankles makes the same two shins, so which pair is wrong comes from the knees' order
         along the subject's right (3,): knees named crossed are the swapped pair (thighs hardly
-        cross, feet often do), else the ankles. out (8, 3), assign, arow (8,) in place; nothing
-        when right is None."""
+        cross, feet often do), else the ankles. Not while a leg is on a point that may lie
+        between two markers (:func:`_between`: a kneeling child's hidden knees made a 2-view
+        point 11 cm off one of them from their merged blobs; tracking named a knee on it, both
+        shins broke and the ankles, named right, were swapped: seed 3 005_12 at x0.75).
+        out (8, 3), assign, arow (8,) in place; nothing when right is None."""
         if right is None or not _legs_apart(assign):
+            return
+        if self._pts is not None and _between(self._pts, assign)[[LK, RK, LA, RA]].any():
             return
         body = self._body
         named, mended = _shin_errors(body, out)
@@ -1762,6 +1773,7 @@ class Labeller:
         if len(self.rig) >= 3:  # with two, ghosts cross legs as often (a dance 43 -> 24 %)
             hint.crossed = self._crossed_before(t)
         trust = self._trust(pts, not self._body.measured)
+        hint.labels, hint.labels_weight = self._recalled(pts, t), cfg.audit_agree
         hyps = identify(pts.X, trust, self._raised(pts), hint, shared=pts.merged_all)
         if not hyps:
             self._t_ambiguous = self._steady = None
@@ -1803,6 +1815,30 @@ class Labeller:
         log.info("t=%.3f s: markers identified from %d points (%d named, margin %.2f)", t, len(pts),
                  int(named.sum()), margin)
         return out, LabelQuality(int(named.sum()), len(pts), 0.1 * margin, 0.0, "identified", 0)
+
+    def _recalled(self, pts: Points3D, t: float) -> np.ndarray:
+        """(8,) per marker the point within ``recall_m`` of where it was last named, at most
+        ``recall_s`` before t (-1 = none): evidence for identifying afresh. A subject kneeling
+        still through a blackout, knees hidden and one foot before the other, came back where
+        she was; the facing cannot tell which foot is which along it, and the close
+        identifications left the ankles to the skeleton, which solved them swapped (seed 3
+        005_12 at x0.75: the rest of the take, 4 s, the ankles' names swapped). A subject who
+        turned in place comes back mirrored near where she was: that evidence (0.3 a marker)
+        is less than a side-by-side pair's left-on-the-left, or the facing's. Only a point and
+        a marker that are each other's only match count (hands together on a hilt come back
+        with both wrists within reach of both points: recalled, a swordplay's wrists came back
+        swapped live for 0.4 s, seed 629 002_07)."""
+        cfg = self.config
+        out = np.full(N_MARKERS, -1, np.int64)
+        recent = (t - self._seen <= cfg.recall_s) & np.isfinite(self._pos).all(axis=1)
+        if cfg.recall_m <= 0 or not recent.any() or not len(pts):
+            return out
+        near = np.linalg.norm(self._pos[recent][:, None] - pts.X[None], axis=2) <= cfg.recall_m  # (R, P)
+        # only one to one: hands together come back with both wrists by both points
+        one = near & (near.sum(axis=1, keepdims=True) == 1) & (near.sum(axis=0, keepdims=True) == 1)
+        rows, cols = np.nonzero(one)
+        out[np.flatnonzero(recent)[rows]] = cols
+        return out
 
     def _agrees(self, prev: tuple[float, np.ndarray] | None, named: np.ndarray) -> bool:
         """Whether an unclear identification's agreed names named (8, 3) m (NaN = left out) are
@@ -1909,6 +1945,17 @@ def _held_since(since: float | None, holds: bool, t: float) -> float | None:
     if not holds:
         return None
     return t if since is None else since
+
+
+def _between(pts: Points3D, assign: np.ndarray) -> np.ndarray:
+    """(8,) bool: markers named (assign (8,): point per marker, -1 = none) on a point seen only
+    in merged blobs or that may hold two knees or two ankles (:func:`_two_in_one`): somewhere
+    between two markers, no place to measure a shin from."""
+    out = np.zeros(N_MARKERS, bool)
+    for m in np.flatnonzero(assign >= 0):
+        p = assign[m]
+        out[m] = pts.n_merged[p] >= pts.n_views[p] or _two_in_one(pts, p, legs=True)
+    return out
 
 
 def _legs_apart(assign: np.ndarray) -> bool:
