@@ -1825,9 +1825,8 @@ class Labeller:
         005_12 at x0.75: the rest of the take, 4 s, the ankles' names swapped). A subject who
         turned in place comes back mirrored near where she was: that evidence (0.3 a marker)
         is less than a side-by-side pair's left-on-the-left, or the facing's. Only a point and
-        a marker that are each other's only match count (hands together on a hilt come back
-        with both wrists within reach of both points: recalled, a swordplay's wrists came back
-        swapped live for 0.4 s, seed 629 002_07)."""
+        a marker that are each other's only match count: hands together on a hilt come back
+        with both wrists near both points, which says nothing of which is which."""
         cfg = self.config
         out = np.full(N_MARKERS, -1, np.int64)
         recent = (t - self._seen <= cfg.recall_s) & np.isfinite(self._pos).all(axis=1)
