@@ -1198,8 +1198,6 @@ class Labeller:
         out (8, 3), assign, arow (8,) in place; nothing when right is None."""
         if right is None or not _legs_apart(assign):
             return
-        if self._pts is not None and _between(self._pts, assign)[[LK, RK, LA, RA]].any():
-            return
         body = self._body
         named, mended = _shin_errors(body, out)
         errs = sorted(named)
@@ -1208,6 +1206,8 @@ class Labeller:
         # hip-width 2-camera dance fell 42 -> 17 %), so it needs three
         one_mended = len(self.rig) >= 3 and max(mended) <= self.config.shin_mend_max * body.tol
         if errs[1] <= body.tol or not (both_broken or one_mended):
+            return
+        if self._pts is not None and _between(self._pts, assign)[[LK, RK, LA, RA]].any():
             return
         pair = _swapped_pair(out, right)
         log.debug("t=%.3f s: %s swapped: %s, swapped both fit", self._t_frame, pair,

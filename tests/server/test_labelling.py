@@ -1593,6 +1593,15 @@ def test_feet_crossed_and_still_through_a_blackout_get_their_names_back(rule):
         assert not np.isfinite(named[back + 1:, [LA, RA]]).any()
 
 
+def _kneeling_child():
+    """The rigid body of seed 3 005_12 at x0.75 (a child kneeling, knees hidden), as the
+    labeller measured her: the subject of the two traced frames below."""
+    from samba_server.labelling.rigid import Body
+
+    return Body(shin=0.3586, shoulder_width=0.2545, reach=0.3821, trunk=0.7081, top=1.8081, tol=0.0659,
+                measured=True, stand=1.1422)
+
+
 @pytest.mark.parametrize("rule", [True, False])
 def test_shins_are_not_judged_from_a_knee_on_a_point_between_two_markers(rule, monkeypatch):
     """Blobs of a rendered take (a child kneeling, knees hidden, seed 3 005_12 at x0.75, frame
@@ -1602,7 +1611,6 @@ def test_shins_are_not_judged_from_a_knee_on_a_point_between_two_markers(rule, m
     swapping the ankles mended them: the ankles were swapped for the last 1.6 s of the take.
     A leg on a point that may lie between two markers (:func:`_between`) has no shin to go by."""
     import samba_server.labelling.labeller as labeller_module
-    from samba_server.labelling.rigid import Body
 
     blobs = [  # per camera: u, v, capacity, radius (px)
         [[5.06, 36.12, 1, 1.49], [9.12, 101.70, 1, 1.78], [71.23, 76.88, 1, 1.60], [72.76, 64.17, 1, 1.69],
@@ -1619,8 +1627,7 @@ def test_shins_are_not_judged_from_a_knee_on_a_point_between_two_markers(rule, m
                         [0.0798, -0.3558, 0.1826], [-0.0103, -0.159, 0.0908]])  # the names (the ankles right)
     lab, pts = _labeller_on_blobs(blobs)
     lab._pts = pts
-    lab._body = Body(shin=0.3586, shoulder_width=0.2545, reach=0.3821, trunk=0.7081, top=1.8081, tol=0.0659,
-                     measured=True, stand=1.1422)  # the child as measured
+    lab._body = _kneeling_child()
     d = np.linalg.norm(pts.X[:, None] - tracked[None], axis=2)  # (P, 8)
     assign = d.argmin(axis=0)
     assert (d.min(axis=0) < 0.01).all() and len(set(assign.tolist())) == 8
@@ -1644,7 +1651,6 @@ def test_crossed_ankles_are_not_uncrossed_by_shins_from_knees_between_two_marker
     points that may lie between two markers (:func:`_between`) leave the shins out: the ankles
     keep their names (the left knee goes unnamed)."""
     import samba_server.labelling.labeller as labeller_module
-    from samba_server.labelling.rigid import Body
 
     blobs = [  # per camera: u, v, capacity, radius (px)
         [[5.03, 36.13, 1, 1.38], [9.10, 101.70, 1, 1.78], [71.23, 76.85, 1, 1.60], [72.78, 64.14, 1, 1.69],
@@ -1662,8 +1668,7 @@ def test_crossed_ankles_are_not_uncrossed_by_shins_from_knees_between_two_marker
     lab, pts = _labeller_on_blobs(blobs)
     if not rule:
         monkeypatch.setattr(labeller_module, "_between", lambda pts, assign: np.zeros(8, bool))
-    lab._body = Body(shin=0.3586, shoulder_width=0.2545, reach=0.3821, trunk=0.7081, top=1.8081, tol=0.0659,
-                     measured=True, stand=1.1422)  # the child as measured
+    lab._body = _kneeling_child()
     t = 8.0
     lab._t_prev, lab._t_frame, lab._pts = t - 1 / FPS, t, pts
     lab._pos[:] = pred
