@@ -131,6 +131,7 @@ class LabelConfig:
     refit_residual_m: float = 0.04  #: names the solver fits no better than this (rms m) are doubted ...
     refit_ratio: float = 0.25  #: ... and swapped when the swap lets it fit them this much better (ratio) ...
     refit_s: float = 0.05  #: ... the same swap for this long (inf: never)
+    rough_jump_m: float = 0.10  #: a rough 2-view point two views miss is no place for a marker farther than this from its prediction
     track_timeout: float = 0.12  #: a marker unseen for longer is predicted from the skeleton
     skeleton_max_age: float = 0.4  #: the skeleton predicts markers up to this long after the last solved pose
     min_tracked: int = 3  #: fewer predictable markers: identify from the points
@@ -608,6 +609,9 @@ class Labeller:
         # to find a marker predicted from the skeleton (unseen longer than track_timeout)
         rough = (pts.n_views[row_pt] < 3) & (pts.unexplained[row_pt] >= 2) & (pts.error[row_pt] > self.points.config.rough_px)
         ok &= ~(rough[:, None] & (t - self._seen > cfg.track_timeout)[None, :])
+        # nor for a tracked marker far from where it was going (a knee whose point vanished
+        # behind the other leg jumped 14 cm onto such a ghost)
+        ok &= ~(rough[:, None] & (d > cfg.rough_jump_m))
         big = 1e3
         full = np.full((Pr, N_MARKERS + Pr), big)
         full[:, :N_MARKERS] = np.where(ok, cost, big)
