@@ -610,7 +610,7 @@ class Labeller:
         rough = (pts.n_views[row_pt] < 3) & (pts.unexplained[row_pt] >= 2) & (pts.error[row_pt] > self.points.config.rough_px)
         ok &= ~(rough[:, None] & (t - self._seen > cfg.track_timeout)[None, :])
         # nor for a tracked marker far from where it was going (a knee whose point vanished
-        # behind the other leg jumped 14 cm onto such a ghost)
+        # behind the other leg jumped 15 cm onto such a ghost)
         ok &= ~(rough[:, None] & (d > cfg.rough_jump_m))
         big = 1e3
         full = np.full((Pr, N_MARKERS + Pr), big)

@@ -229,12 +229,21 @@ def test_replay_waits_for_a_stalled_server_and_reports_losses(tmp_path, capsys) 
             time.sleep(1.5)
         return ingest(*a, **kw)
 
-    server.ingest = stalling
+    handle, handled = server._handle, [0]
+
+    def counting(item) -> list:
+        out = handle(item)
+        handled[0] += item[0] == "packet"
+        return out
+
+    server.ingest, server._handle = stalling, counting
     endpoint = free_endpoint()
     with LiveServer(server, session="st", listen=[endpoint]):
         player = Player(path, "st", connect=[endpoint], speed=None)
         assert player.play() == n
-        assert calls[0] == n and server.backlog == 0 and player.taken_in == n
+        # every packet processed (not the backlog: the player's motes leave as it ends, and a
+        # loaded machine may not have handled those two leaves yet)
+        assert calls[0] == n and handled[0] == n and player.taken_in == n
     assert len(server.poses) == n // 2
 
     lossy = Server(default_rig(2))
