@@ -220,8 +220,6 @@ def test_markers_named_on_a_merged_blobs_point_are_loose_for_the_solver():
     that stands for both (each ankle placed to its side of it). The solver is told those two
     are rough (``Labeller.loose``), not the six markers seen apart; a name on no point of the
     frame is rough too."""
-    from samba_server.labelling.rigid import LA, RA
-
     rig = default_rig(4)
     pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("together", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
     feet = pose[[LA, RA]].mean(axis=0)
@@ -249,8 +247,6 @@ def test_tracking_gone_wrong_is_corrected_by_a_fresh_identification(audit):
     skeleton) keeps itself wrong: mid-take the left knee and ankle tracks are moved onto the
     right leg and the right leg's tracks are lost (no skeleton to predict them). The audit by a fresh identification names every marker right again within 0.2 s;
     without it the left leg stays wrong or unnamed."""
-    from samba_server.labelling.rigid import LA, LK, RA, RK
-
     rig = default_rig(4)
     truth = _motion(3.0)
     cfg = LabelConfig() if audit else replace(LabelConfig(), audit_interval=float("inf"))
@@ -282,8 +278,6 @@ def test_a_wrist_that_took_a_shoulders_point_gives_it_back(unglue, wrist):
     track is moved onto the left shoulder and the shoulder's track dropped; the names are
     right again within 0.5 s, and stay wrong without the rule. (A right hand on the left
     shoulder kept its point to the end of a whole-clip take until the rule took either wrist.)"""
-    from samba_server.labelling.rigid import LS, LW, RW
-
     W = LW if wrist == "left" else RW
     rig = default_rig(4)
     truth = _motion(3.0)
@@ -334,7 +328,6 @@ def test_merged_knees_and_merged_ankles_each_name_two_markers():
     Each names two markers (the second a little less surely than a separate point would: 6 + 2
     x 0.4), and the audit's scorer gives identify's labelling identify's score."""
     from samba_server.labelling.identify import Hint, identify, score_labels
-    from samba_server.labelling.rigid import LA, LK, RA, RK, Body
 
     body = Body.from_lengths(None)
     pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("together", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
@@ -558,7 +551,6 @@ def test_a_knee_is_not_taken_for_an_ankle_whose_knee_is_unnamed():
     right labelling, so identification left both legs unnamed and tracking later named them
     wrongly. An ankle without its knee stays near the floor: that rival is clearly worse."""
     from samba_server.labelling.identify import Hint, identify
-    from samba_server.labelling.rigid import LA, LK, Body
     X = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
     X[2], X[3] = X[0] + [-0.05, 0.1, -0.5], X[1] + [0.05, 0.1, -0.5]  # arms down
     trust = np.zeros(8)
@@ -577,7 +569,6 @@ def test_a_subject_who_turned_during_a_blackout_is_not_named_from_the_old_facing
     for 1.25 s. A lost subject may have turned (``facing_turn_rate``): within that the old
     facing costs nothing, and the body decides."""
     from samba_server.labelling.identify import Hint, identify
-    from samba_server.labelling.rigid import Body
     X = np.array([[-0.17, 0.01, 1.57], [0.19, 0.03, 1.53], [-0.19, 0.39, 1.66], [0.11, 0.5, 1.66],
                   [-0.06, 0.26, 0.56], [0.12, 0.02, 0.54], [-0.11, 0.13, 0.09], [0.03, -0.28, 0.16]])
     body = Body.from_lengths(None, measured=False)
@@ -629,7 +620,6 @@ def test_the_prior_body_grows_only_for_a_subject_standing_on_the_floor():
     two cameras only (ghosts at any height) leave it as it is. Shoulders lower than standing
     (a child) still shrink it wherever the feet are."""
     from samba_server.labelling.identify import sized
-    from samba_server.labelling.rigid import Body
     prior = Body.from_lengths(CMU_MEAN, measured=False)
     high = np.array([0.0, 0.0, 1.9]), np.array([0.4, 0.0, 1.9])
     low = np.array([0.0, 0.0, 1.1]), np.array([0.3, 0.0, 1.1])
@@ -646,7 +636,6 @@ def test_knees_seen_in_merged_blobs_are_not_taken_for_crossed_legs():
     identification needs, and the knees stayed unnamed through the standard pose. Knees in
     one lateral order and ankles in the other (crossed legs) cost more."""
     from samba_server.labelling.identify import Hint, identify
-    from samba_server.labelling.rigid import LK, RK, Body
     X = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
     X[[LK, RK], 0] *= 0.5
     shared = np.zeros(8, bool)
@@ -663,7 +652,6 @@ def test_a_leg_crossing_over_the_other_keeps_its_names():
     20 cm to its left, knee and ankle alike, tracked frame to frame. Swapping the legs back
     ("legs do not cross") fits the shins exactly as well, so it used to swap them for as long
     as the legs stayed crossed."""
-    from samba_server.labelling.rigid import RA, RK
     rig = default_rig(4)
     pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
     n = 90
@@ -776,7 +764,6 @@ def test_a_small_subjects_merged_legs_are_named_in_the_standard_pose():
     right labelling, so the legs stayed unnamed through the standard pose and the walk's
     first 2 s were not solved. Shared across the sides, a knee must still be above its ankle."""
     from samba_server.labelling.identify import Hint, identify
-    from samba_server.labelling.rigid import Body
     X = np.array([[-0.166, 0.0, 1.332], [0.603, 0.0, 1.331], [-0.602, 0.001, 1.331], [0.166, 0.001, 1.332],
                   [0.0, 0.0, 0.502], [0.001, 0.0, 0.08], [0.377, -0.376, 0.306], [-0.403, -0.403, 0.309],
                   [-0.375, 0.375, 0.321], [0.402, 0.402, 0.324]])
@@ -1445,7 +1432,6 @@ def _legs_pose(left_ankle: np.ndarray, right_ankle: np.ndarray, left_knee_lift: 
     """Markers (8, 3) of the hip-width standard pose with the left knee raised forward by
     left_knee_lift (m, along a circle about the hip) and each ankle moved to x, y = the (2,)
     given, its height set so that the shin keeps its length."""
-    from samba_server.labelling.rigid import LA, LK, RA, RK
     pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)].copy()
     shin = float(np.linalg.norm(pose[LK] - pose[LA]))
     thigh = float(DEFAULT_LENGTHS[6])
@@ -1496,8 +1482,6 @@ def test_a_swapped_ankle_pair_that_breaks_both_shins_is_swapped_back(rule):
     merged point the wrong way round): nothing is crossed, so only the shins tell, both broken
     and both mended by swapping the ankles back. Right again at once with the rule; wrong to the
     end without it."""
-    from samba_server.labelling.rigid import LA, LK, RA, RK
-
     rig = default_rig(4)
     stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
     raised = _legs_pose(np.array([0.06, 0.22]), np.array([0.08, 0.0]), left_knee_lift=0.3)
@@ -1596,8 +1580,6 @@ def test_feet_crossed_and_still_through_a_blackout_get_their_names_back(rule):
 def _kneeling_child():
     """The rigid body of seed 3 005_12 at x0.75 (a child kneeling, knees hidden), as the
     labeller measured her: the subject of the two traced frames below."""
-    from samba_server.labelling.rigid import Body
-
     return Body(shin=0.3586, shoulder_width=0.2545, reach=0.3821, trunk=0.7081, top=1.8081, tol=0.0659,
                 measured=True, stand=1.1422)
 
@@ -1730,8 +1712,6 @@ def test_ankles_swapped_where_one_knee_is_a_shin_from_both_are_swapped_back(rule
     the standing ankle sits between the knees, a shin from both, so when the ankles' names
     swap only the other shin breaks. Swapping them back fits both shins: right again at once
     with the rule; without it the broken shin's knee is dropped and the swap stays."""
-    from samba_server.labelling.rigid import LA, LK, RA, RK
-
     rig = default_rig(4)
     stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
     shin = float(np.linalg.norm(stand[LK] - stand[LA]))
@@ -1779,8 +1759,6 @@ def test_feet_held_crossed_but_named_side_by_side_are_named_crossed(rule):
     flags). The ankles' names are swapped mid-hold: nothing looks crossed and both shins stay
     within the tolerance, so no other rule sees it; only the shins fitting clearly better the
     other way round tell. Right again within 0.25 s with the rule; wrong to the end without it."""
-    from samba_server.labelling.rigid import LA, LK, RA, RK
-
     rig = default_rig(4)
     truth, hold = _feet_crossed_hold(150)
     lab = _measured(rig, rule, cross_s=float("inf"))
@@ -1805,8 +1783,6 @@ def test_feet_held_crossed_are_named_crossed_while_a_knee_flickers():
     those frames the shins cannot be compared, which says nothing against the crossing: the
     ``cross_s`` hold goes on through them instead of starting again, so that it never held
     (traced on a dance from 8 s on another body). The hidden knee's frames are not scored."""
-    from samba_server.labelling.rigid import LA, LK, RA
-
     rig = default_rig(4)
     truth, _hold = _feet_crossed_hold(150)
     seen = truth.copy()
@@ -1826,8 +1802,6 @@ def test_crossed_feet_are_not_uncrossed_on_the_word_of_one_knee_between_the_knee
     "legs do not cross" took it for a swap (a dance from 8 s on another body, 005_18: ankles
     named the wrong way round for 1.1 s). With one shin to go by, an uncrossing must fit
     ``cross_gain_m`` better, as the crossing does; with both, half a centimetre."""
-    from samba_server.labelling.rigid import LA, LK, RA, RK
-
     rig = default_rig(4)
     truth, _hold = _feet_crossed_hold(130)
     seen = truth.copy()
@@ -1847,7 +1821,6 @@ def test_feet_held_crossed_through_a_blackout_are_identified_crossed_again():
     only, so the legs were left to a skeleton that named them mirrored: 70 % of the take's
     frames right and 29 % confidently wrong (99 % and none with the order kept)."""
     from samba_server.labelling.identify import Hint, identify
-    from samba_server.labelling.rigid import Body
     X = np.array([[-0.515, 0.476, 1.79], [0.457, 0.292, 1.062], [0.168, 0.158, 1.427], [-0.153, 0.276, 1.525],
                   [0.011, 0.203, 0.562], [-0.04, 0.39, 0.57], [-0.142, -0.144, 0.254], [0.077, 0.297, 0.107]])
     body = Body(shin=0.489, shoulder_width=0.361, reach=0.501, trunk=0.939, top=2.196, tol=0.071, measured=True,
@@ -1867,8 +1840,6 @@ def test_legs_named_with_the_knees_crossed_for_a_second_are_swapped_back(rule):
     names are swapped mid-take (knee and ankle together): the shins fit as well as before, and
     the ankles now look uncrossed, but the knees cross, which thighs hardly ever do for long.
     After 1 s of crossed knees the legs get their names back; without the rule they never do."""
-    from samba_server.labelling.rigid import LA, LK, RA, RK
-
     rig = default_rig(4)
     stand = _legs_pose(np.array([-0.09, 0.0]), np.array([0.09, 0.0]))
     fifth = _legs_pose(np.array([0.06, 0.07]), np.array([-0.06, -0.07]))
@@ -1973,8 +1944,6 @@ def test_a_hand_leaving_its_shoulder_with_the_names_swapped_gets_them_back(rule)
     the arm and within the rigid tolerance of the shoulder width. With the rule the shoulder
     width from the left shoulder tells them apart within 0.2 s of parting; without it they stay
     swapped."""
-    from samba_server.labelling.rigid import RS, RW
-
     rig = default_rig(4)
     pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("apart", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
     on_shoulder = pose.copy()
@@ -2004,8 +1973,6 @@ def test_hands_that_parted_from_a_hilt_swapped_are_named_right_once_an_arm_stret
     002_07 on another body), the right wrist's name lies 3 cm beyond the arm's reach of the
     right shoulder, while the other naming puts both wrists well within it: with the rule the
     names swap back; without it they stay swapped."""
-    from samba_server.labelling.rigid import LS, LW, RS, RW
-
     rig = default_rig(4)
     pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("apart", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
     mid = 0.5 * (pose[LS] + pose[RS])
@@ -2032,8 +1999,6 @@ def test_a_stretched_arm_with_skin_markers_is_within_its_reach():
     beyond it): with the arm stretched out the wrist marker lies farther from the shoulder
     marker than the arm's bones reach, by more than the wrist swap by reach allows. The
     subject's offsets widen the reach by them: the stretched arm is within it."""
-    from samba_server.labelling.rigid import LS, LW, Body
-
     pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("apart", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)].copy()
     offsets = np.zeros((8, 3))
     offsets[LS], offsets[LW] = [0.0, 0.0, 0.05], [-0.03, 0.0, 0.0]
@@ -2394,7 +2359,6 @@ def test_a_leg_the_skeleton_lifts_is_found_again_as_the_one_pair_that_fits(pair,
     points a shin apart, knee above ankle, on the right side of the other leg, is that leg:
     named again at once; without the rule it stays unnamed."""
     from samba_common.skeleton import J
-    from samba_server.labelling.rigid import RA, RK
 
     if not pair:
         monkeypatch.setattr(Labeller, "_recover_leg", lambda self, *a: None)
@@ -2422,7 +2386,6 @@ def test_a_wrist_whose_skeleton_went_wrong_is_found_again_as_the_one_marker_unna
     markers: named again at once (seen by two of three cameras, so a possible ghost); without
     the rule (``wrist_clear_m`` = inf) it stays unnamed."""
     from samba_common.skeleton import J
-    from samba_server.labelling.rigid import RW
 
     rig = _three_cameras()
     joints, _t = synthetic_motion(2.0, FPS)
@@ -2475,7 +2438,6 @@ def test_both_legs_the_skeleton_lifts_are_found_again_as_the_one_pair_of_shins(r
     ankle, the left knee to the subject's left, are the legs: named at once; without the rule
     not one of them is named right."""
     from samba_common.skeleton import J
-    from samba_server.labelling.rigid import LA, LK, RA, RK
 
     if not rule:
         monkeypatch.setattr(Labeller, "_recover_legs", lambda self, *a: None)
@@ -2587,7 +2549,6 @@ def test_a_wrist_and_its_shoulder_named_the_other_way_round_fit_no_body_and_are_
     does not: no body in it (here without the clip the pose comes from) takes the pose the
     swapped names make. With the rule (the server hands the labeller the reconstructor's
     ``body_distance``) the names come back within 0.1 s; without it they stay swapped."""
-    from samba_server.labelling.rigid import LS, LW
     from samba_server.recon.db import load_default_db
     from samba_server.recon.reconstruct import Reconstructor
     from samba_server.server import Server
@@ -2646,8 +2607,6 @@ def test_two_wrists_on_one_point_split_along_their_tracks(hands):
     (the left one on the subject's right). Split along the subject's right instead, as for a
     clap, both come out wrong (three held-out seeds: 154-197 frames with a wrong name on the 49
     benchmark takes against 293-339 when a database fit chose between the two)."""
-    from samba_server.labelling.rigid import LW, RW
-
     pose = tpose(DEFAULT_LENGTHS)[list(MARKER_JOINT)]
     hands_at = pose[[0, 1]].mean(axis=0) + [0.0, 0.4, -0.3]
     right = np.array([1.0, 0.0, 0.0])  # the subject faces +Y
@@ -2670,7 +2629,6 @@ def test_two_wrists_on_one_point_with_two_cameras_split_the_way_the_database_pre
     other on a hilt), whichever set of markers lies nearer a body of the motion database
     (``pose_fit``); without a database, along the subject's right."""
     from samba_server.labelling.labeller import _guess_split
-    from samba_server.labelling.rigid import LW, RW
 
     pose = tpose(DEFAULT_LENGTHS)[list(MARKER_JOINT)]
     hilt = pose[[0, 1]].mean(axis=0) + [0.0, 0.4, -0.3]
@@ -2700,8 +2658,6 @@ def _right_leg_raised(n: int, degrees: float, frames: int) -> np.ndarray:
     """(n, 8, 3) markers: the hip-width standard pose for 1.5 s (90 frames), then the straight
     right leg swung forwards (+Y, the way the subject faces) and up about the hip by
     ``degrees`` over ``frames``, and held."""
-    from samba_server.labelling.rigid import RA, RK
-
     stand = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
     hip = stand[RK] + [0.0, 0.0, float(DEFAULT_LENGTHS[6])]
     truth = np.repeat(stand[None], n, axis=0)
@@ -2722,7 +2678,6 @@ def test_a_knee_and_its_ankle_named_the_other_way_round_in_a_high_kick_are_swapp
     within 1 cm. With the rule (``refit_s``) the server swaps the names within 0.1 s, and the
     frames after carry the renamed bits; without it they stay swapped. (Raising the leg names
     nothing wrongly: see the mirror test below.)"""
-    from samba_server.labelling.rigid import RA, RK
     from samba_server.recon.reconstruct import Reconstructor
     from samba_server.server import Server
 
@@ -2760,7 +2715,6 @@ def test_a_hidden_knee_named_on_its_kicking_ankle_gives_the_name_to_the_ankle():
     leg from the hip (rms residual > 4 cm), and with the name moved to the ankle the solver
     fits the markers within 1 cm: within 0.1 s the server names the point the ankle, the
     knee stays unnamed while hidden, and nothing is named wrongly after."""
-    from samba_server.labelling.rigid import RA, RK
     from samba_server.recon.reconstruct import Reconstructor
     from samba_server.server import Server
 
@@ -2847,8 +2801,6 @@ def test_a_hand_in_front_of_a_shoulder_keeps_its_name_when_the_shoulder_takes_it
     left with cam1's blob alone: no point. Tracking names it from the two blobs near its
     prediction (off, ``rescue_m`` 0: unnamed), for at most ``rescue_max_s`` (1 s) after it was
     last named on a point (held 1.5 s: named for 1 s, then not)."""
-    from samba_server.labelling.rigid import LW, RS
-
     rig = default_rig(4)
     pose = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
     c0 = rig.cameras[0].center
@@ -3369,7 +3321,6 @@ def test_legs_tracked_into_crossed_ankles_are_not_renamed_for_the_database(legs_
     tracking keeps the names. With that swap tried (as before), the held pose is named the
     other way round."""
     from samba_server.labelling import labeller as L
-    from samba_server.labelling.rigid import LA, LK, RA, RK
 
     rig = default_rig(4)
     stand = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
@@ -3467,8 +3418,6 @@ def _passe() -> np.ndarray:
     front of the left knee over 0.5 s (the knee forwards and out, shin and thigh kept), held
     there 20 frames, then lowered the way it came over 0.5 s while the left leg steps 10 cm to
     the subject's left."""
-    from samba_server.labelling.rigid import LA, LK, RA, RK
-
     stand = tpose(DEFAULT_LENGTHS, stance=stance_offset("hip", float(DEFAULT_LENGTHS[1])))[list(MARKER_JOINT)]
     thigh, shin = float(DEFAULT_LENGTHS[6]), float(DEFAULT_LENGTHS[7])
     hip = stand[RK] + [0.0, 0.0, thigh]
@@ -3504,8 +3453,6 @@ def test_a_raised_foot_parting_from_the_other_knee_keeps_its_name(rule):
     dropped for its broken shin) for the rest of the take, as on a held-out dance (005_11, both
     seeds). With the rule (``part_gain_m``) the two take each other's point, the shins fitting
     by far better, and both are named right once apart."""
-    from samba_server.labelling.rigid import LK, RA
-
     rig = default_rig(4)
     truth = _passe()
     assert np.linalg.norm(truth[:, LK] - truth[:, RA], axis=1).min() < 0.06
