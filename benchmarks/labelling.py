@@ -35,6 +35,7 @@ the section it writes.
     python benchmarks/labelling.py --seconds 30 --clips 001_01 002_10 001_08 001_14 002_07 002_06 002_05 005_18 002_08 005_12 006_12 005_04   # the 12 clips of >= 10 s, whole
     python benchmarks/labelling.py --body-scale 0.75   # child-sized bodies (1.25: very tall adults)
     python benchmarks/labelling.py --calibration benchmarks/rigs/high.toml   # another rig than samba-sim's
+    python benchmarks/labelling.py --stance together   # the standard pose with the feet touching (default: hip width)
     python benchmarks/labelling.py --seed 601 --cameras 4   # bodies no rule was traced on: the held-out figure
 """
 
@@ -58,6 +59,7 @@ from samba_common.calib import CameraRig, default_rig  # noqa: E402
 from samba_common.skeleton import MARKER_JOINT  # noqa: E402
 from samba_mote.sim.render import SimConfig  # noqa: E402
 from samba_mote.sim.take import load_motion, make_take, prepare_motion  # noqa: E402
+from samba_mote.sim.tpose import STANCES  # noqa: E402
 from samba_server.app import load_server_configs  # noqa: E402
 from samba_server.labelling.score import TELEPORT_M_S, TELEPORT_S, score_take, separable_visible  # noqa: E402
 from samba_server.process import process_videos  # noqa: E402
@@ -89,6 +91,8 @@ KINDS = {"tuned": TUNED, "checked": CHECKED, "unseen": UNSEEN, "fresh": FRESH}
 CLIPS = TUNED + CHECKED + UNSEEN + FRESH
 #: the seed the labelling was traced and tuned on (its figures are development figures)
 SEED = 3
+#: the standard pose's feet, in words, by --stance
+STANCE_TEXT = {"hip": "at hip width", "apart": "wider than the hips", "together": "together"}
 #: with --start, a clip with less motion than this left (s) is skipped: too short for a blackout mid-motion
 MIN_PART_S = 3.0
 
@@ -179,6 +183,8 @@ def main() -> int:
                          "children, 1.25 for very tall adults")
     ap.add_argument("--blackout", type=float, default=1.0, help="seconds of total blackout mid-motion (0 = none)")
     ap.add_argument("--codec", default="mjpg", choices=["ffv1", "mjpg", "h264"])
+    ap.add_argument("--stance", default="hip", choices=list(STANCES),
+                    help="feet in the standard pose, as samba-sim --stance (default hip: at hip width)")
     ap.add_argument("--seed", type=int, default=SEED,
                     help=f"bodies, noise and distractors (default {SEED}, the seed the labelling was developed on; "
                          "another seed gives bodies no rule was traced on, recorded in a section of its own)")
@@ -219,7 +225,7 @@ def main() -> int:
         joints, _lengths = vary_body(joints, np.random.default_rng([args.seed, zlib.crc32(clip.encode())]),
                                      scale=args.body_scale)
         for n_cam in args.cameras:
-            base = SimConfig(codec=args.codec)
+            base = SimConfig(codec=args.codec, tpose_stance=args.stance)
             n_lead = prepare_motion(joints, t, base)[2]
             motion_s = len(t) / _fps
             lead_s = n_lead / base.fps
@@ -312,6 +318,8 @@ def main() -> int:
         title += f", bodies x{args.body_scale:g} (--body-scale {args.body_scale:g})"
     if own_rig is not None:
         title += f", rig {args.calibration.stem} (--calibration)"
+    if args.stance != "hip":
+        title += f", feet {STANCE_TEXT[args.stance]} (--stance {args.stance})"
     if args.seed != SEED:  # other bodies and noise: its own section, the development seed's stays
         title += f", seed {args.seed} (--seed {args.seed})"
     print("\n".join(summary))  # this run's lines; the record also keeps the other camera counts'
@@ -327,8 +335,8 @@ def main() -> int:
                [f"Held-out subjects (database without the clip's subject), "
                 f"{'bodies varied' if size is None else f'bodies x{size:g} the subject (bone types varied)'}, "
                 f"{'' if own_rig is None else f'the rig of {args.calibration.name} ({rig_text(own_rig)}), '}"
-                f"samba-sim defaults (feet at hip "
-                f"width, standard pose in the middle of the volume and a continuous walk into the clip, occlusion by the "
+                f"samba-sim defaults (feet {STANCE_TEXT[args.stance]}, "
+                f"standard pose in the middle of the volume and a continuous walk into the clip, occlusion by the "
                 f"body, distractors, noise), {args.blackout:g} s blackout mid-motion, {args.codec.upper()} videos through "
                 f"samba-process's offline path ({'forwards only' if args.one_pass else 'labelled from both ends'}; "
                 f"in brackets and 'live': the forward pass alone, what samba-server gives); <= {args.seconds:g} s of "
