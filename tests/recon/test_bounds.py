@@ -9,8 +9,8 @@ import pytest
 from samba_common.body import prepend_standard_pose
 from samba_common.bvh import load_bvh, resample
 from samba_common.skeleton import JOINT_NAMES, MARKER_JOINT
-from samba_server.recon.bounds import (CONFIDENT_M, UNSEEN_SPEED, mirrored_legs, mirrored_wrists, swivel_radius,
-                                       widened)
+from samba_server.recon.bounds import (CONFIDENT_M, UNSEEN_SPEED, mirrored_legs, mirrored_pairs, mirrored_wrists,
+                                       swivel_radius, widened)
 from samba_server.recon.db import load_default_db
 from samba_server.recon.evaluate import vary_body
 from samba_server.recon.reconstruct import reconstruct_take
@@ -116,3 +116,24 @@ def test_wrists_no_view_separates_cover_each_other():
     assert np.allclose(out[0, arm], 0.14)
     assert np.allclose(np.delete(out[0], arm), 0.03) and np.allclose(out[1], bounds[1])
     assert bounds[0, J["left_wrist"]] == 0.03  # a new array
+
+
+def test_with_two_cameras_a_knee_beside_a_hidden_one_is_no_surer_than_the_hidden_one():
+    """Two cameras (left and right a guess): each side's bound covers the other side's joint,
+    and covers it only as surely as that one is drawn. Frame 0: both knees seen (bounds 3 cm),
+    12 cm apart: 15 cm each. Frame 1: the right knee hidden for a while (bound 60 cm) and drawn
+    12 cm from the left one, which may be the right knee's point named the other way round: the
+    left knee is no longer confident (the 2-camera benchmark's knee drawn 33 cm off with 13 cm)."""
+    joints = np.zeros((2, 13, 3))
+    joints[:, J["left_knee"]], joints[:, J["right_knee"]] = [0.0, 0.06, 0.5], [0.0, -0.06, 0.5]
+    joints[:, J["left_ankle"]], joints[:, J["right_ankle"]] = [0.0, 0.5, 0.1], [0.0, -0.5, 0.1]
+    joints[:, J["left_shoulder"]], joints[:, J["right_shoulder"]] = [0.0, 0.2, 1.4], [0.0, -0.2, 1.4]
+    bounds = np.full((2, 13), 0.03)
+    bounds[1, J["right_knee"]] = 0.6
+    out = mirrored_pairs(bounds, joints)
+    assert np.allclose(out[0, [J["left_knee"], J["right_knee"]]], 0.15)
+    assert np.allclose(out[1, [J["left_knee"], J["right_knee"]]], 0.72)
+    assert out[1, J["left_knee"]] >= CONFIDENT_M > out[0, J["left_knee"]]
+    assert np.allclose(out[:, [J["left_ankle"], J["right_ankle"]]], 1.03)  # 1 m apart, seen
+    assert np.allclose(out[:, [J["left_hip"], J["right_hip"], J["head"]]], 0.03)  # mirrored names barely move them
+    assert bounds[1, J["left_knee"]] == 0.03  # a new array
