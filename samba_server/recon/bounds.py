@@ -128,10 +128,15 @@ def mirrored_pairs(bounds: np.ndarray, joints: np.ndarray) -> np.ndarray:
     the passes' agreement) told those frames apart. Each raise also adds the larger of the
     pair's own bounds: named the other way round, a joint is where the other side's is drawn
     only as surely as that one is (a knee named on the other knee's point while that one is
-    hidden was drawn 33-50 cm off with a 9-16 cm bound). The hips and the head stay. A new array."""
+    hidden was drawn 33-50 cm off with a 9-16 cm bound). The hips and the head then take the
+    raised bounds of the markers they are placed from (:func:`widened`): names a pair of views
+    cannot tell apart are not only mirrored but shifted (a shoulder on the other one, that one on
+    a wrist), which moves the head and hips with them (drawn 22-44 cm off with 11-20 cm bounds).
+    A new array."""
     elbows = [elbow for elbow, _sh, _wr in _ARMS]
-    return _mirrored(bounds, joints, True, ((_SHOULDERS, _SHOULDERS + elbows), (_WRISTS, _WRISTS + elbows),
-                                            (elbows, elbows), (_KNEES, _KNEES), (_ANKLES, _ANKLES)), own=True)
+    out = _mirrored(bounds, joints, True, ((_SHOULDERS, _SHOULDERS + elbows), (_WRISTS, _WRISTS + elbows),
+                                           (elbows, elbows), (_KNEES, _KNEES), (_ANKLES, _ANKLES)), own=True)
+    return widened(out, out[..., list(MARKER_JOINT)])
 
 
 def _mirrored(bounds: np.ndarray, joints: np.ndarray, unsure: np.ndarray | bool, groups,
