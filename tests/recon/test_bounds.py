@@ -120,10 +120,11 @@ def test_wrists_no_view_separates_cover_each_other():
 
 def test_with_two_cameras_a_knee_beside_a_hidden_one_is_no_surer_than_the_hidden_one():
     """Two cameras (left and right a guess): each side's bound covers the other side's joint,
-    and covers it only as surely as that one is drawn; the joints placed from them follow. Frame 0: both knees seen (bounds 3 cm),
-    12 cm apart: 15 cm each. Frame 1: the right knee hidden for a while (bound 60 cm) and drawn
-    12 cm from the left one, which may be the right knee's point named the other way round: the
-    left knee is no longer confident (the 2-camera benchmark's knee drawn 33 cm off with 13 cm)."""
+    and covers it only as surely as that one is drawn; the joints placed from them follow.
+    Frame 0: both knees seen (bounds 3 cm), 12 cm apart: 15 cm each. Frame 1: the right knee
+    hidden for a while (bound 60 cm) and drawn 12 cm from the left one, which may be the right
+    knee's point named the other way round: the left knee is no longer confident (the 2-camera
+    benchmark's knee drawn 33 cm off with 13 cm)."""
     joints = np.zeros((2, 13, 3))
     joints[:, J["left_knee"]], joints[:, J["right_knee"]] = [0.0, 0.06, 0.5], [0.0, -0.06, 0.5]
     joints[:, J["left_ankle"]], joints[:, J["right_ankle"]] = [0.0, 0.5, 0.1], [0.0, -0.5, 0.1]
@@ -137,5 +138,6 @@ def test_with_two_cameras_a_knee_beside_a_hidden_one_is_no_surer_than_the_hidden
     assert np.allclose(out[:, [J["left_ankle"], J["right_ankle"]]], 1.03)  # 1 m apart, seen
     # the head and hips are placed from the shoulders and knees: names shifted, they move with them
     assert np.allclose(out[:, J["head"]], 0.43)  # the shoulders 40 cm apart, seen
-    assert np.allclose(out[0, [J["left_hip"], J["right_hip"]]], 0.43) and np.allclose(out[1, [J["left_hip"], J["right_hip"]]], 0.72)
+    hips = [J["left_hip"], J["right_hip"]]
+    assert np.allclose(out[0, hips], 0.43) and np.allclose(out[1, hips], 0.72)
     assert bounds[1, J["left_knee"]] == 0.03  # a new array
