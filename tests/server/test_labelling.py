@@ -725,6 +725,20 @@ def _labeller_on_blobs(blobs: list, config: LabelConfig | None = None) -> tuple[
     return lab, lab.points.reconstruct(lab._views)
 
 
+def _track_after_named_frame(lab: Labeller, pts: Points3D, pred: np.ndarray, facing: list[float], gate: np.ndarray,
+                             unseen: dict[int, float] | None = None, t: float = 8.0) -> np.ndarray:
+    """Named markers (8, 3) m of ``lab._track`` on the frame at t s whose points are pts, after
+    a frame (1 / FPS before) that named every marker on a point at pred (8, 3) m, but those of
+    unseen (marker -> s since last named), with the subject facing ``facing`` (2,); gate (8,) m."""
+    lab._t_prev, lab._t_frame, lab._pts = t - 1 / FPS, t, pts
+    lab._pos[:] = pred
+    lab._seen[:] = lab._on_point[:] = t - 1 / FPS
+    for m, age in (unseen or {}).items():
+        lab._seen[m] = lab._on_point[m] = t - age
+    lab._facing, lab._t_facing = np.array(facing), t - 1 / FPS
+    return lab._track(pts, pred, gate, t)[0]
+
+
 def _points_from_blobs(blobs: list, config: PointsConfig | None = None) -> Points3D:
     """3D points of one frame of the default 4-camera rig from per-camera blob lists
     [[u, v, capacity, radius (px)], ...] (a traced frame of a rendered take), with the
@@ -1651,12 +1665,7 @@ def test_crossed_ankles_are_not_uncrossed_by_shins_from_knees_between_two_marker
     if not rule:
         monkeypatch.setattr(labeller_module, "_between", lambda pts, assign: np.zeros(8, bool))
     lab._body = _kneeling_child()
-    t = 8.0
-    lab._t_prev, lab._t_frame, lab._pts = t - 1 / FPS, t, pts
-    lab._pos[:] = pred
-    lab._seen[:] = lab._on_point[:] = t - 1 / FPS
-    lab._facing, lab._t_facing = np.array([-0.1505, 0.9886]), t - 1 / FPS
-    out, _q, _assign = lab._track(pts, pred, np.full(8, 0.125), t)
+    out = _track_after_named_frame(lab, pts, pred, [-0.1505, 0.9886], np.full(8, 0.125))
     ankles_off = np.linalg.norm(out[[LA, RA]] - pred[[LA, RA]], axis=1)
     if rule:
         assert (ankles_off < 0.01).all(), ankles_off
@@ -1692,13 +1701,8 @@ def test_a_tracked_knee_does_not_jump_onto_a_ghost_two_views_miss(rule):
     lab, pts = _labeller_on_blobs(blobs, config)
     lab._body = Body(shin=0.4471, shoulder_width=0.2964, reach=0.4185, trunk=0.7828, top=1.9725, tol=0.0684,
                      measured=True, stand=1.3042)  # as the labeller measured the dancer
-    t = 8.0
-    lab._t_prev, lab._t_frame, lab._pts = t - 1 / FPS, t, pts
-    lab._pos[:] = pred
-    lab._seen[:] = lab._on_point[:] = t - 1 / FPS
-    lab._seen[LK] = lab._on_point[LK] = t - 0.15
-    lab._facing, lab._t_facing = np.array([-0.0389, 0.9992]), t - 1 / FPS
-    out, _q, _assign = lab._track(pts, pred, np.array([0.125] * 4 + [0.15] + [0.125] * 3), t)
+    out = _track_after_named_frame(lab, pts, pred, [-0.0389, 0.9992], np.array([0.125] * 4 + [0.15] + [0.125] * 3),
+                                   unseen={LK: 0.15})
     off = np.linalg.norm(out[[RK, LA, RA]] - pred[[RK, LA, RA]], axis=1)
     if rule:
         assert (off < 0.01).all(), off
