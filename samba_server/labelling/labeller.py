@@ -312,7 +312,7 @@ class Labeller:
         # dancer's left knee, hidden, named on the point of the kicking ankle above it: 7-12 cm
         # rms for 0.2 s, 1-2 cm with the ankle's name; the mirror image only as _swappable says)
         moves = (_FIT_MOVES & ~named).any(axis=1)
-        moves[_MIRROR] = False
+        moves[[_MIRROR, _UPPER_MIRROR]] = False
         rows = np.flatnonzero((self._swappable(named, t) | moves) & (_FIT_MOVES & off).any(axis=1))
         fits = np.array([trial(markers[_FIT_SWAPS[r]]) for r in rows])
         ok = np.isfinite(fits) & (fits < cfg.refit_ratio * residual)
@@ -1337,11 +1337,18 @@ class Labeller:
         subject round in one frame: only a fresh identification (``fit_mirror_s``) can have got
         that wrong, not names tracked since (a straight leg raised 45 degrees in front lies
         nearer a database body named as the other leg stretched behind, and was so renamed).
-        With two cameras the mirror image is always tried."""
+        The upper body's mirror image (shoulders and wrists) only outside that window. With two
+        cameras the mirror image is always tried, the upper body's never."""
         ok = ~(_FIT_MOVES & ~named).any(axis=1)
         # with two cameras mirrored identifications are common and the fit mends them later
         # (three 2-camera benchmark takes lost 2.6-8 points with the window)
-        ok[_MIRROR] &= t - self._t_identified <= self.config.fit_mirror_s or len(self.rig) < 3
+        identified = t - self._t_identified <= self.config.fit_mirror_s or len(self.rig) < 3
+        ok[_MIRROR] &= identified
+        # the upper body's mirror where the whole one is not: there a mirrored identification is
+        # the likely mistake, and the upper mirror, as near a body as the whole one for a subject
+        # standing, left the legs mirrored (005_19 seed 649, a fresh body back from a blackout
+        # identified mirrored: the legs named for each other for the last 2.7 s)
+        ok[_UPPER_MIRROR] &= not identified
         return ok
 
     def _uncross_knees(self, out: np.ndarray, assign: np.ndarray, arow: np.ndarray, right: np.ndarray,
@@ -2086,6 +2093,7 @@ _FIT_SWAP_PAIRS = (
 _FIT_SWAPS = _permutations(_FIT_SWAP_PAIRS)
 _FIT_MOVES = _FIT_SWAPS != np.arange(N_MARKERS)
 _MIRROR = len(_FIT_SWAPS) - 1  #: the row of _FIT_SWAPS naming every marker for its other side
+_UPPER_MIRROR = _FIT_SWAP_PAIRS.index(((LS, RS), (LW, RW)))  #: the row naming the shoulders and wrists so
 _LEGS = _FIT_SWAP_PAIRS.index(_LEG_PAIRS)  #: the row naming each leg for the other
 _LR_PAIRS = {(LS, RS), (LW, RW), (LK, RK), (LA, RA)}
 #: a knee and the other leg's ankle (:meth:`Labeller._part`)

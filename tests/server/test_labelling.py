@@ -2592,7 +2592,9 @@ def test_an_upper_body_named_mirrored_over_legs_named_right_fits_no_body_and_is_
     came out mirrored over legs named right, for the 2 s up to the blackout, in both passes
     (002_06 seed 647). Every rigid length holds either way; the motion database does not: no
     body in it (here without the clip) has its chest turned round from its legs. With the
-    rule the names come back within 0.15 s; without it they stay mirrored."""
+    rule the names come back within 0.15 s; without it they stay mirrored. (Tracked since the
+    identification for longer than ``fit_mirror_s``: within it the whole mirror is tried
+    instead.)"""
     from samba_server.recon.db import load_default_db
     from samba_server.recon.reconstruct import Reconstructor
     from samba_server.server import Server
@@ -2607,14 +2609,16 @@ def test_an_upper_body_named_mirrored_over_legs_named_right_fits_no_body_and_is_
     cfg = LabelConfig() if rule else replace(LabelConfig(), fit_swap_s=float("inf"))
     lab = Server(rig, reconstructor=rec, label_config=cfg).labeller
     lab.set_lengths(DEFAULT_LENGTHS)
-    truth = np.repeat(pose[None], 60, axis=0)
-    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(3), 30, [LS, LW, RW, RS])
+    # the swap well after the identification (fit_mirror_s): within it the whole mirror is tried
+    at = int((cfg.fit_mirror_s + 0.2) * FPS)
+    truth = np.repeat(pose[None], at + 30, axis=0)
+    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(3), at, [LS, LW, RW, RS])
     right = _right(named, truth).all(axis=1)
-    assert right[:30].all()
+    assert right[:at].all()
     if rule:
-        assert right[30 + int(0.15 * FPS):].all()
+        assert right[at + int(0.15 * FPS):].all()
     else:
-        assert not right[32:].any()
+        assert not right[at + 2:].any()
 
 
 @pytest.mark.parametrize("steady", [True, False])
