@@ -109,6 +109,7 @@ class LabelConfig:
     shins_margin_m: float = 0.04  #: both ankles (or knees) unnamed, the other two named: named on the two free points that fit the shins this much better (m, both summed) than any other pairing (inf: never)
     wrist_clear_m: float = 0.15  #: a lost wrist found within its arm's reach must be this far from every named marker
     apart_views: int = 2  #: both wrists named, neither seen apart from the other in this many views (hands together): the poses carry them unnamed, a gap rather than a coin flip, still solved from them (0: never; :meth:`Labeller.unseparated`)
+    together_m: float = 0.3  #: ... only wrists named this close (m): farther apart no track confuses them (inf: any)
     max_turn_rate: float = 12.0  #: rad/s: the facing may turn this fast ...
     turn_slack_deg: float = 45.0  #: ... plus this much (noise of the shoulder points) between labellings
     crossed_m: float = 0.06  #: a right knee or ankle this far left of the left one is taken for a swap
@@ -419,11 +420,16 @@ class Labeller:
         no view can settle: 14-16 cm swapped for a second in a swordplay. The server's poses and
         ``samba-process``'s two-way output carry them unnamed; the solves still use them (the
         two-way one loosely) and raise the wrists' and elbows' bounds to the distance between
-        the wrists (:func:`~samba_server.recon.bounds.mirrored_wrists`). All False with
-        ``apart_views`` 0."""
+        the wrists (:func:`~samba_server.recon.bounds.mirrored_wrists`). Only for wrists named
+        within ``together_m`` of each other: a subject standing still, hands hanging 52 cm
+        apart, each wrist's blob merged with another marker's in the views that saw it and the
+        other wrist hidden there, had both wrists unnamed in 32 of the take's last 40 frames
+        (006_02 seed 649), names no track could have confused. All False with ``apart_views``
+        0."""
         out = np.zeros(N_MARKERS, bool)
         need = self.config.apart_views
-        if need <= 0 or not np.isfinite(markers[[LW, RW]]).all():
+        if need <= 0 or not np.isfinite(markers[[LW, RW]]).all() or \
+                np.linalg.norm(markers[LW] - markers[RW]) > self.config.together_m:
             return out
         blobs = self._blobs_of(markers)
         lw, rw = blobs[LW], blobs[RW]
