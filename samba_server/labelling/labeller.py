@@ -434,12 +434,12 @@ class Labeller:
         need = self.config.apart_views
         if need <= 0 or not np.isfinite(markers[[LW, RW]]).all():
             return out
-        blobs = self._blobs_of(markers)
+        p, on = self._points_of(markers)
+        blobs = self._blobs_of(markers, (p, on))
         lw, rw = blobs[LW], blobs[RW]
-        if np.linalg.norm(markers[LW] - markers[RW]) > self.config.together_m and not ((lw >= 0) & (lw == rw)).any():
-            p, on = self._points_of(markers)
-            if on[[LW, RW]].all() and (self._pts.error[p[[LW, RW]]] <= self.points.config.rough_px).all():
-                return out
+        if np.linalg.norm(markers[LW] - markers[RW]) > self.config.together_m and not ((lw >= 0) & (lw == rw)).any() \
+                and on[[LW, RW]].all() and (self._pts.error[p[[LW, RW]]] <= self.points.config.rough_px).all():
+            return out
         if (lw >= 0).any() and np.array_equal(lw, rw):
             out[[LW, RW]] = True
             return out
@@ -452,12 +452,13 @@ class Labeller:
         out[[LW, RW]] = True
         return out
 
-    def _blobs_of(self, markers: np.ndarray) -> np.ndarray:
+    def _blobs_of(self, markers: np.ndarray, points: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """(8, C) the blob per view of the point each marker of markers (8, 3) m is named on, or of
         the two blobs it was rescued from (:meth:`_rescue`); -1 where it has none (not named, not
-        seen in that view, or on no point: placed beside a merged point)."""
+        seen in that view, or on no point: placed beside a merged point). points: the markers'
+        :meth:`_points_of`, when the caller has looked them up."""
         out = np.full((N_MARKERS, len(self._views)), -1, np.int64)
-        p, on = self._points_of(markers)
+        p, on = self._points_of(markers) if points is None else points
         if on.any():
             out[on] = self._pts.blob[:, p[on]].T
         for X, blobs in self._rescue_blobs:

@@ -2538,6 +2538,29 @@ def test_both_ankles_lost_beside_each_other_are_found_again_on_the_points_that_f
         assert not np.isfinite(np.array(named)[60:, [LA, RA]]).any()
 
 
+def _swapped_under_the_fit(pose: np.ndarray, clip: str, markers: list[int], at: int, rule: bool):
+    """A subject holding pose (8, 3) for at + 30 frames (4 cameras), labelled by a server whose
+    database lacks clip, the tracks of markers reversed in order before frame at (as
+    :func:`_run_swapping_tracks`); without the rule the database fit never swaps names
+    (``fit_swap_s`` inf). Returns (2,) the database's distances of the pose and of the pose so
+    renamed, and (at + 30,) bool: every marker named right in that frame."""
+    from samba_server.recon.db import load_default_db
+    from samba_server.recon.reconstruct import Reconstructor
+    from samba_server.server import Server
+
+    rig = default_rig(4)
+    rec = Reconstructor(load_default_db().without(lambda name: name.split("~")[0] == clip), lengths=DEFAULT_LENGTHS)
+    renamed = pose.copy()
+    renamed[markers] = pose[markers[::-1]]
+    near = rec.body_distance(np.array([pose, renamed]))
+    cfg = LabelConfig() if rule else replace(LabelConfig(), fit_swap_s=float("inf"))
+    lab = Server(rig, reconstructor=rec, label_config=cfg).labeller
+    lab.set_lengths(DEFAULT_LENGTHS)
+    truth = np.repeat(pose[None], at + 30, axis=0)
+    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(3), at, markers)
+    return near, _right(named, truth).all(axis=1)
+
+
 #: a CMU pose (the playground clip 006_11, mirrored) on the default body, upright and facing +Y:
 #: the left hand raised beside its shoulder, 20 cm from it
 _HAND_BY_SHOULDER = np.array([
@@ -2553,23 +2576,8 @@ def test_a_wrist_and_its_shoulder_named_the_other_way_round_fit_no_body_and_are_
     does not: no body in it (here without the clip the pose comes from) takes the pose the
     swapped names make. With the rule (the server hands the labeller the reconstructor's
     ``body_distance``) the names come back within 0.1 s; without it they stay swapped."""
-    from samba_server.recon.db import load_default_db
-    from samba_server.recon.reconstruct import Reconstructor
-    from samba_server.server import Server
-
-    rig = default_rig(4)
-    rec = Reconstructor(load_default_db().without(lambda name: name.split("~")[0] == "006_11"), lengths=DEFAULT_LENGTHS)
-    pose = _HAND_BY_SHOULDER
-    swapped = pose.copy()
-    swapped[[LS, LW]] = pose[[LW, LS]]
-    near = rec.body_distance(np.array([pose, swapped]))
+    near, right = _swapped_under_the_fit(_HAND_BY_SHOULDER, "006_11", [LS, LW], 30, rule)
     assert near[0] < 0.5 * near[1]
-    cfg = LabelConfig() if rule else replace(LabelConfig(), fit_swap_s=float("inf"))
-    lab = Server(rig, reconstructor=rec, label_config=cfg).labeller
-    lab.set_lengths(DEFAULT_LENGTHS)
-    truth = np.repeat(pose[None], 60, axis=0)
-    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(3), 30, [LS, LW])
-    right = _right(named, truth).all(axis=1)
     assert right[:30].all()
     if rule:
         assert right[30 + int(0.1 * FPS):].all()
@@ -2595,25 +2603,10 @@ def test_an_upper_body_named_mirrored_over_legs_named_right_fits_no_body_and_is_
     rule the names come back within 0.15 s; without it they stay mirrored. (Tracked since the
     identification for longer than ``fit_mirror_s``: within it the whole mirror is tried
     instead.)"""
-    from samba_server.recon.db import load_default_db
-    from samba_server.recon.reconstruct import Reconstructor
-    from samba_server.server import Server
-
-    rig = default_rig(4)
-    rec = Reconstructor(load_default_db().without(lambda name: name.split("~")[0] == "002_06"), lengths=DEFAULT_LENGTHS)
-    pose = _HANDS_IN_FRONT
-    mirrored = pose.copy()
-    mirrored[[LS, RS, LW, RW]] = pose[[RS, LS, RW, LW]]
-    near = rec.body_distance(np.array([pose, mirrored]))
-    assert near[0] < 0.5 * near[1]
-    cfg = LabelConfig() if rule else replace(LabelConfig(), fit_swap_s=float("inf"))
-    lab = Server(rig, reconstructor=rec, label_config=cfg).labeller
-    lab.set_lengths(DEFAULT_LENGTHS)
     # the swap well after the identification (fit_mirror_s): within it the whole mirror is tried
-    at = int((cfg.fit_mirror_s + 0.2) * FPS)
-    truth = np.repeat(pose[None], at + 30, axis=0)
-    named = _run_swapping_tracks(lab, rig, truth, np.random.default_rng(3), at, [LS, LW, RW, RS])
-    right = _right(named, truth).all(axis=1)
+    at = int((LabelConfig().fit_mirror_s + 0.2) * FPS)
+    near, right = _swapped_under_the_fit(_HANDS_IN_FRONT, "002_06", [LS, LW, RW, RS], at, rule)
+    assert near[0] < 0.5 * near[1]
     assert right[:at].all()
     if rule:
         assert right[at + int(0.15 * FPS):].all()
@@ -3325,7 +3318,7 @@ def test_wrists_far_apart_on_sharp_points_are_never_taken_for_hands_together(tog
     blobs[RW, [2, 3]] = 0  # and the other way round
     for v in lab._views:
         v.capacity[0] = 2  # each of those blobs the size of two markers
-    lab._blobs_of = lambda markers: blobs
+    lab._blobs_of = lambda markers, points=None: blobs
     if rough:
         p, _on = lab._points_of(named)
         lab._pts.error[p[RW]] = 2 * lab.points.config.rough_px
