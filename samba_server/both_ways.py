@@ -334,6 +334,9 @@ def backward_pass(server: Server, packets: list[list], t: np.ndarray, progress=N
     twin = Server(server.rig, None, rec.again(subject), ServerConfig(max_lag_ms=0.0, keep_history=False),
                   tri_config=server.triangulator.config, label_config=label_config)
     F = len(t)
+    if F:
+        # the reflections the forward pass learnt are there from the backward pass's first frame
+        twin.labeller.still.seed(server.labeller.still.static(float(t[-1])), 0.0)
     out = PassResult(np.full((F, N_MARKERS, 3), np.nan), np.zeros(F, np.int64), np.full(F, np.nan),
                      np.full(F, np.nan), np.zeros((F, N_MARKERS), bool), np.full(F, np.nan), np.zeros(F, bool),
                      np.zeros((F, N_MARKERS), bool))

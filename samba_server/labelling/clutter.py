@@ -22,7 +22,7 @@ from numba import njit
 
 from .blobs import ViewBlobs
 
-__all__ = ["StillBlobs", "warm_up"]
+__all__ = ["StillBlobs", "on_clutter", "warm_up"]
 
 
 class StillBlobs:
@@ -60,9 +60,27 @@ class StillBlobs:
         self._matched = (views, matched)
         return out
 
-    def update(self, views: list[ViewBlobs], named: np.ndarray, t: float) -> None:
+    def static(self, t: float) -> list[np.ndarray]:
+        """Per view (K, 2) px: the positions that are clutter at t (the last frame learnt) and
+        were seen then."""
+        out = []
+        for pos, _n, since, seen in self._state:
+            out.append(pos[(t - since >= self.still_s) & (seen >= t)].copy())
+        return out
+
+    def seed(self, static: list[np.ndarray], t: float) -> None:
+        """Start from static's positions (per view (K, 2) px, :meth:`static` of a pass over the
+        same take) as clutter learnt by t (s): a reflection stays where it is, and a pass that
+        starts with the subject standing still learns nothing for still_s (``samba-process``'s
+        backward pass)."""
+        self._state = [(p.copy(), np.full(len(p), 50, np.int64), np.full(len(p), -np.inf), np.full(len(p), t))
+                       for p in static]
+
+    def update(self, views: list[ViewBlobs], named: np.ndarray, t: float, identified: bool = False) -> None:
         """Learn from one frame: views (rig order); named (8, C) the blob per view of each named
-        marker (-1: none; :meth:`Labeller._blobs_of`); t s (increasing)."""
+        marker (-1: none; :meth:`Labeller._blobs_of`); t s (increasing); identified: the names
+        come from an identification (against the body), not from tracking: they clear clutter
+        too."""
         if not np.isfinite(self.still_s):
             return
         same = self._matched[0] is views
@@ -71,8 +89,21 @@ class StillBlobs:
             uv = np.asarray(v.uv, float).reshape(-1, 2)
             j = self._matched[1][c] if same else _match(pos, since, uv, self.still_px, t, self.still_s)[0]
             marks = np.ascontiguousarray(named[:, c], np.int64)
-            self._state[c] = _learn(pos, n, since, seen, uv, j, marks, t, self.gap_s, self.forget_s, self.still_s)
+            self._state[c] = _learn(pos, n, since, seen, uv, j, marks, t, self.gap_s, self.forget_s, self.still_s,
+                                    identified)
         self._matched = ([], [])
+
+
+def on_clutter(blob: np.ndarray, clutter: list[np.ndarray] | None) -> np.ndarray:
+    """(K,) how many views see each point or candidate of blob (C, K) (index per view, -1 =
+    none) in a blob that clutter (per view (N,) bool, :meth:`StillBlobs.clutter`; None: none)
+    marks."""
+    out = np.zeros(blob.shape[1], np.int64)
+    for c, cl in enumerate(clutter or []):
+        if cl.any():
+            has = blob[c] >= 0
+            out[has] += cl[blob[c, has]]
+    return out
 
 
 def warm_up() -> None:
@@ -80,7 +111,8 @@ def warm_up() -> None:
     first live frame."""
     pos, since = np.zeros((1, 2)), np.zeros(1)
     j, _ = _match(pos, since, np.zeros((1, 2)), 0.5, 0.0, 2.0)
-    _learn(pos, np.ones(1, np.int64), since, since, np.zeros((1, 2)), j, np.full(1, -1, np.int64), 0.0, 0.25, 2.0, 2.0)
+    _learn(pos, np.ones(1, np.int64), since, since, np.zeros((1, 2)), j, np.full(1, -1, np.int64), 0.0, 0.25, 2.0, 2.0,
+           False)
 
 
 @njit(cache=True)
@@ -106,11 +138,12 @@ def _match(pos: np.ndarray, since: np.ndarray, uv: np.ndarray, radius: float, t:
 
 @njit(cache=True)
 def _learn(pos: np.ndarray, n: np.ndarray, since: np.ndarray, seen: np.ndarray, uv: np.ndarray, j: np.ndarray,
-           marks: np.ndarray, t: float, gap_s: float, forget_s: float,
-           still_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+           marks: np.ndarray, t: float, gap_s: float, forget_s: float, still_s: float,
+           identified: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One frame learnt: each blob uv (N, 2) px on its position j (N,) (-1: a new one) moves
     that position's running mean and marks it seen at t; a blob some marker is named on (marks:
-    the named markers' blob indices, -1 = none) restarts its position's stillness; positions
+    the named markers' blob indices, -1 = none) restarts its position's stillness, unless the
+    position is clutter already and the names are tracking's (not ``identified``); positions
     gone longer than gap_s (learnt clutter: forget_s) are dropped. Returns the new (pos, n,
     since, seen)."""
     N, K = len(uv), len(pos)
@@ -130,8 +163,12 @@ def _learn(pos: np.ndarray, n: np.ndarray, since: np.ndarray, seen: np.ndarray, 
         pos[k, 1] = (pos[k, 1] * w + uv[i, 1]) / (w + 1)
         n[k] += 1
         seen[k] = t
-        if used[i]:
-            since[k] = t  # a name uses it: a marker, not clutter
+        if used[i] and (identified or t - since[k] < still_s):
+            # a name uses it: a marker, not clutter. Not a track's name on learnt clutter: a
+            # marker named there, its blob merging with a reflection's, made the reflection a
+            # marker, and the name moved onto it (with another view's blob) as the marker left
+            # that view (006_02 seed 651: a wrist 38 cm off for 0.8 s)
+            since[k] = t
     keep = np.zeros(K, np.bool_)
     for k in range(K):
         absent = t - seen[k]

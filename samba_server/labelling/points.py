@@ -57,6 +57,7 @@ from samba_common.calib import CameraRig
 
 from ..triangulate import TriangulationResult, Triangulator
 from .blobs import ViewBlobs, median_rows, percentile
+from .clutter import on_clutter
 from .elongation import blob_separation
 
 __all__ = ["PointsConfig", "Points3D", "PointReconstructor"]
@@ -119,6 +120,12 @@ class Points3D:
 
     def __len__(self) -> int:
         return len(self.X)
+
+    def subset(self, keep: np.ndarray) -> "Points3D":
+        """The points keep ((P,) bool) selects, every field alike."""
+        return Points3D(self.X[keep], self.n_views[keep], self.error[keep], self.unexplained[keep],
+                        self.blob[:, keep], self.votes[keep], self.merged[keep], self.merged_all[keep],
+                        self.n_merged[keep], self.mirrored[keep], None if self.behind is None else self.behind[keep])
 
     @staticmethod
     def empty(n_cameras: int) -> "Points3D":
@@ -423,7 +430,7 @@ class PointReconstructor:
             # went before the knee, left with 2 views by a hidden marker's point (003_01)
             far_ghost = (n_views >= 3) & (missing > 0) & away
         # greedy acceptance, best first
-        penalty = missing + 2 * far + FAR_GHOST * (far_ghost | self._on_clutter(blob, clutter) | self._outmatched(
+        penalty = missing + 2 * far + FAR_GHOST * (far_ghost | (on_clutter(blob, clutter) > 0) | self._outmatched(
             ok, X, n_views, err, blob, missing, far, views))
         fresh = (X.copy(), err.copy(), n_views.copy(), blob.copy())  # before acceptance reduces candidates
         keep, capl = self._accept(penalty, views, ok, X, err, n_views, blob, uv)
@@ -475,17 +482,6 @@ class PointReconstructor:
         behind = self._behind(views, proj, depth, n_views[idx], blob, missing)
         return Points3D(X[idx], n_views[idx].astype(np.int64), err[idx], missing, blob,
                         votes, n_merged > 0, merged_all, n_merged, mirrored, behind)
-
-    @staticmethod
-    def _on_clutter(blob: np.ndarray, clutter: list[np.ndarray] | None) -> np.ndarray:
-        """(K,) bool: the candidates of blob (C, K) (-1 = none) that use a blob clutter (per view
-        (N,) bool, or None) marks."""
-        out = np.zeros(blob.shape[1], bool)
-        for c, cl in enumerate(clutter or []):
-            if cl.any():
-                has = blob[c] >= 0
-                out[has] |= cl[blob[c, has]]
-        return out
 
     def _outmatched(self, ok: np.ndarray, X: np.ndarray, n_views: np.ndarray, err: np.ndarray, blob: np.ndarray,
                     missing: np.ndarray, far: np.ndarray, views: list[ViewBlobs]) -> np.ndarray:

@@ -179,7 +179,7 @@ def test_static_reflections_in_the_views_are_learnt_and_a_still_subjects_markers
         t = i / FPS
         shown = [r[1:] if 150 <= i < 180 else r for r in reflections]  # the first one hidden for 0.5 s
         lab.label(_packets(rig, m, t, rng, distractors=shown), t)
-        clutter = lab._still.clutter(lab._views, t)
+        clutter = lab.still.clutter(lab._views, t)
         for c, v in enumerate(lab._views):
             on_reflection = np.linalg.norm(v.uv[:, None] - reflections[c][None], axis=2).min(axis=1) < 0.01
             flagged_markers += int((clutter[c] & ~on_reflection).sum())
