@@ -259,6 +259,7 @@ class Labeller:
         self._sharing: dict[tuple[int, int], float] = {}  # a knee and the other ankle -> since when they share a point
         self._sharing_t = -np.inf  # the frame _sharing was last updated in
         self._views: list = []  # this frame's blobs per camera (ViewBlobs)
+        self._clutter: list[np.ndarray] = []  # this frame's static reflections per camera ((N,) bool per view)
         self._pts: Points3D | None = None  # this frame's 3D points
         self._knees_crossed_since: float | None = None
         self._legs_unsure = False  # the legs' names may be each other's (legs_unsure)
@@ -524,7 +525,7 @@ class Labeller:
         self._rescued[:] = False
         self._rescue_blobs = []
         self._views = [view_blobs(p) for p in packets]
-        clutter = self.still.clutter(self._views, t)
+        clutter = self._clutter = self.still.clutter(self._views, t)
         pts = every = self._pts = self.points.reconstruct(self._views, clutter)
         if len(pts) >= 2:
             self.stats.frames_with_points += 1
@@ -843,7 +844,7 @@ class Labeller:
                     continue
                 r = reach * self.points.f[c] / depth[c, i] + 1.0
                 dist = np.linalg.norm(v.uv - proj[c, i], axis=1)
-                near.append(np.flatnonzero(dist <= r).tolist())
+                near.append(np.flatnonzero((dist <= r) & ~self._clutter[c]).tolist())  # (no reflection: _real)
             combos = [(a, b, ba, bb) for a, b in itertools.combinations(range(C), 2)
                       for ba in near[a] for bb in near[b]
                       if ba not in taken[a] or bb not in taken[b] or (ba not in held[a] and bb not in held[b])]
