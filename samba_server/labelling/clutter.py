@@ -61,12 +61,9 @@ class StillBlobs:
         return out
 
     def static(self, t: float) -> list[np.ndarray]:
-        """Per view (K, 2) px: the positions that are clutter at t (the last frame learnt) and
-        were seen then."""
-        out = []
-        for pos, _n, since, seen in self._state:
-            out.append(pos[(t - since >= self.still_s) & (seen >= t)].copy())
-        return out
+        """Per view (K, 2) px: the positions that are clutter at t (s, the last frame learnt)
+        and were seen within gap_s of it."""
+        return [pos[(t - since >= self.still_s) & (t - seen <= self.gap_s)].copy() for pos, _n, since, seen in self._state]
 
     def seed(self, static: list[np.ndarray], t: float) -> None:
         """Start from static's positions (per view (K, 2) px, :meth:`static` of a pass over the
