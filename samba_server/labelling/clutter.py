@@ -9,10 +9,12 @@ that starts with the subject already in the volume has them from its first frame
 
 :class:`StillBlobs` remembers, per view, where blobs sat still (within ``still_px``) and since
 when, and forgets a position as soon as a named marker's point uses its blob (a marker standing
-still is named, clutter never is). A blob still for ``still_s`` counts as clutter: the points
-stage ranks the candidates that use it one view fewer (:meth:`PointReconstructor.reconstruct`).
-A marker seen by one view only while it stands still long enough is taken for clutter too; its
-candidates still make points, they only go after the others.
+still is named, clutter never is); once a position is clutter, only an identification's names
+clear it, not tracking's. A blob still for ``still_s`` counts as clutter: the points stage ranks
+the candidates that use it one view fewer (:meth:`PointReconstructor.reconstruct`), and a point
+fewer than two views see in blobs that are not clutter (:func:`on_clutter`) is no marker for
+tracking (:meth:`Labeller._real`). A marker seen by one view only while it stands still long
+enough is taken for clutter too: it stays unnamed until it moves or an identification names it.
 """
 
 from __future__ import annotations
