@@ -722,6 +722,7 @@ def _labeller_on_blobs(blobs: list, config: LabelConfig | None = None) -> tuple[
     rig = default_rig(4)
     lab = Labeller(rig, _server_triangulator(rig), config)
     lab._views = _views_from_blobs(blobs)
+    lab._clutter = [np.zeros(len(v), bool) for v in lab._views]  # no static reflection learnt
     return lab, lab.points.reconstruct(lab._views)
 
 
