@@ -1039,6 +1039,14 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         hit &= ~np.isfinite(markers[:, s]).all(axis=1)  # still unnamed (or disputed in a mix)
         markers[hit, s] = bwd.markers[hit, s]
         markers[hit & _within(markers[:, w], bwd.markers[:, s]), w] = np.nan
+        # ... and the wrist its backward name, where that names no point twice: the hand lost
+        # at the shoulder is found where the backward pass tracked it (a dancer's left wrist
+        # unnamed for 0.5 s while the backward pass named it right, 005_11 seed 652)
+        for k in np.flatnonzero(hit & ~np.isfinite(markers[:, w]).all(axis=1) & nb[:, w]):
+            mixed = markers[k].copy()
+            mixed[w] = bwd.markers[k, w]
+            if _doubles(mixed) <= _doubles(markers[k]):
+                markers[k] = mixed
         from_b |= hit
     markers, course = _on_course(markers, bwd.markers, t, unsure=bwd.unseparated)
     better = _fits_better(fwd, bwd, nf, nb, both) if fit else np.zeros(len(t), bool)
