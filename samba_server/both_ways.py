@@ -921,7 +921,8 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
     ``CLEAR_M``), name a shoulder otherwise and name as many markers, or at least 4; the backward names from a forward
     rename on that both passes refute (:func:`_refuted`); a shoulder the forward pass left
     unnamed where it names a wrist on that shoulder's backward point (:func:`_wrist_on_shoulder`;
-    the wrist unnamed there), also where a mix left it unnamed; the backward names of a and b
+    the wrist its backward name where that names no point twice, else unnamed), also where a
+    mix left it unnamed; the backward names of a and b
     where the forward pass names a, picked up after a gap, on the point the backward pass
     tracks as b (:func:`_picked_up`; not with ``picked_up`` False, as with two cameras). A
     forward name kept on a point whose backward name is taken for another marker, and that

@@ -957,11 +957,13 @@ def test_a_short_slip_of_the_forward_name_gives_way_to_the_backward_one_that_kee
 
 
 def test_a_wrist_on_the_point_the_backward_pass_names_its_unnamed_shoulder_gives_it_back():
-    """A hand at the other shoulder (a dribble): from frame 100 to 130 the forward pass names
-    the left wrist on the right shoulder's point and leaves the right shoulder unnamed, with no
-    rename; the backward pass names the right shoulder there and the left wrist elsewhere. The
-    shoulder takes its backward name and the wrist, which both passes cannot place, is unnamed.
-    Where the forward pass names the shoulder too (two markers on one point), nothing changes."""
+    """A hand lost at the other shoulder (a dribble): from frame 100 to 130 the forward pass
+    names the left wrist on the right shoulder's point and leaves the right shoulder unnamed,
+    with no rename; the backward pass names the right shoulder there and the left wrist
+    elsewhere. The shoulder takes its backward name, and the wrist its backward one (005_11 seed
+    652: the wrist unnamed 0.5 s while the backward pass had it right, 90.1 -> 97.6 %), unless
+    that names a point twice: then it is unnamed. Where the forward pass names the shoulder
+    too (two markers on one point), nothing changes."""
     F = 240
     t = np.arange(F) / FPS
     b = _in_a_row(F)
@@ -972,10 +974,15 @@ def test_a_wrist_on_the_point_the_backward_pass_names_its_unnamed_shoulder_gives
     none = np.zeros(F, np.int64)
     markers, from_b = choose(PassResult(a, none, np.zeros(F)), PassResult(b, none, np.zeros(F)), t)
     assert np.array_equal(np.flatnonzero(from_b), np.arange(100, 130))
-    assert np.allclose(markers[100:130, RS], b[100:130, RS]) and np.isnan(markers[100:130, LW]).all()
+    assert np.allclose(markers[100:130, RS], b[100:130, RS]) and np.allclose(markers[100:130, LW], b[100:130, LW])
     others = [m for m in range(8) if m not in (RS, LW)]
     assert np.allclose(markers[100:130, others], a[100:130, others])
     assert np.allclose(markers[:100], a[:100]) and np.allclose(markers[130:], a[130:])
+    on_ankle = b.copy()
+    on_ankle[100:130, LW] = b[100:130, LA]  # the backward wrist on the point the left ankle holds
+    markers = choose(PassResult(a, none, np.zeros(F)), PassResult(on_ankle, none, np.zeros(F)), t)[0]
+    assert np.allclose(markers[100:130, RS], b[100:130, RS]) and np.isnan(markers[100:130, LW]).all()
+    assert np.allclose(markers[100:130, LA], a[100:130, LA])
 
 
 def test_a_backward_wrist_on_the_forward_shoulder_point_does_not_displace_the_shoulder():
