@@ -670,10 +670,7 @@ def _shoulder_kept(markers: np.ndarray, fwd: np.ndarray, bwd: np.ndarray) -> Non
         # another marker: its upper body is named one place on, not a hand lost at a shoulder
         hit &= ~_within(fwd[:, other, None], np.delete(bwd, other, axis=1)).any(axis=1)
         for k in np.flatnonzero(hit):
-            mixed = markers[k].copy()
-            mixed[[w, s]] = fwd[k, [w, s]]
-            if _doubles(mixed) <= _doubles(markers[k]):
-                markers[k] = mixed
+            _take_undoubled(markers, k, [w, s], fwd[k, [w, s]])
 
 
 def _misfits(p: PassResult, frames: np.ndarray) -> np.ndarray:
@@ -825,6 +822,18 @@ def _halves(renamed: np.ndarray) -> np.ndarray:
 def _doubles(markers: np.ndarray) -> int:
     """Pairs of named markers (8, 3) within 1 cm of each other: one point named twice."""
     return int(np.count_nonzero(np.triu(_on_one_point(markers), 1)))
+
+
+def _take_undoubled(markers: np.ndarray, k: int, idx: list[int], names: np.ndarray) -> bool:
+    """Frame k of markers (F, 8, 3) takes names (len(idx), 3) for the markers idx, in place,
+    unless that names one point twice more often than before (:func:`_doubles`); returns
+    whether it did."""
+    mixed = markers[k].copy()
+    mixed[idx] = names
+    if _doubles(mixed) > _doubles(markers[k]):
+        return False
+    markers[k] = mixed
+    return True
 
 
 def _parted(markers: np.ndarray, fwd: PassResult, bwd: PassResult, t: np.ndarray) -> np.ndarray:
@@ -1032,10 +1041,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
             markers[k], from_b[k] = mixed, True
     for a, b, k0, k1 in _picked_up(fwd.markers, bwd.markers) if picked_up else []:
         for k in range(k0, k1 + 1):
-            mixed = markers[k].copy()
-            mixed[[a, b]] = bwd.markers[k, [a, b]]
-            if _doubles(mixed) <= _doubles(markers[k]):
-                markers[k], from_b[k] = mixed, True
+            from_b[k] |= _take_undoubled(markers, k, [a, b], bwd.markers[k, [a, b]])
     for w, s, hit in _wrist_on_shoulder(fwd.markers, bwd.markers):
         hit &= ~np.isfinite(markers[:, s]).all(axis=1)  # still unnamed (or disputed in a mix)
         markers[hit, s] = bwd.markers[hit, s]
@@ -1044,10 +1050,7 @@ def choose(fwd: PassResult, bwd: PassResult, t: np.ndarray, window_s: float = 1.
         # at the shoulder is found where the backward pass tracked it (a dancer's left wrist
         # unnamed for 0.5 s while the backward pass named it right, 005_11 seed 652)
         for k in np.flatnonzero(hit & ~np.isfinite(markers[:, w]).all(axis=1) & nb[:, w]):
-            mixed = markers[k].copy()
-            mixed[w] = bwd.markers[k, w]
-            if _doubles(mixed) <= _doubles(markers[k]):
-                markers[k] = mixed
+            _take_undoubled(markers, k, [w], bwd.markers[k, [w]])
         from_b |= hit
     markers, course = _on_course(markers, bwd.markers, t, unsure=bwd.unseparated)
     better = _fits_better(fwd, bwd, nf, nb, both) if fit else np.zeros(len(t), bool)

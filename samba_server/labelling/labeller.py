@@ -538,8 +538,9 @@ class Labeller:
         n_pred = int(np.isfinite(pred).all(axis=1).sum())
         q = LabelQuality(n_points=len(pts))
         out = np.full((N_MARKERS, 3), np.nan)
+        real = self._real(every, clutter)
         if n_pred >= self.config.min_tracked:
-            pts = self._pts = self._real(pts, clutter)
+            pts = self._pts = real
         if n_pred >= self.config.min_tracked and len(pts):
             self._uncross(pts, pred)
             out, q, assign = self._track(pts, pred, gate, t)
@@ -559,7 +560,6 @@ class Labeller:
                 self._update(out, t, shared=self._shared)
                 return out, q
             log.debug("t=%.3f: tracking explains %d of %d points: identifying again", t, q.n_labelled, len(pts))
-        real = self._real(every, clutter)
         # (a subject standing still, never named, makes clutter of every blob: then all of them)
         pts = self._pts = real if len(real) >= _IDENTIFY_REAL else every
         if self._t_lost is None and len(pts) >= 2:
