@@ -988,6 +988,7 @@ class Labeller:
         cost = np.full((len(free), len(lost)), np.inf)
         right = None if self._facing is None else right_of(self._facing)
         moving = None
+        only_wrists = set(lost.tolist()) <= {LW, RW}
         for j, m in enumerate(lost):
             if np.isfinite(pred[m]).all():
                 d = np.linalg.norm(X - pred[m], axis=1)
@@ -1001,8 +1002,11 @@ class Labeller:
                 if assign[other] >= 0:
                     d = np.linalg.norm(X - (named[other] + sign * body.shoulder_width * right), axis=1)
                     anchor = np.where(d <= 3 * body.tol, d, np.inf)
-            if m in (LW, RW) and lost.size == 1:
-                # the one marker unnamed, a wrist: anywhere within its arm's reach, if nearer
+            if m in (LW, RW) and only_wrists:
+                # the one marker unnamed, a wrist (or the two wrists, the rest named: the
+                # assignment and its margin settle which is which; a standing subject's hands,
+                # both hidden for 0.1 s after a blackout, were found by no prediction and left
+                # unnamed to the take's end, 002_03 seed 655): anywhere within its arm's reach, if nearer
                 # its own shoulder than the other one (else at a cost), clear of the named
                 # markers (a point hugging one is more likely its ghost), not a static
                 # reflection, not a doubtful 2-view point whose every blob a named marker uses
@@ -1016,7 +1020,8 @@ class Labeller:
                 own, other = (LS, RS) if m == LW else (RS, LS)
                 ds = np.linalg.norm(X - named[own], axis=1)
                 do = np.linalg.norm(X - named[other], axis=1)
-                clear = _nearest(X, np.delete(named, m, axis=0))
+                others = np.delete(named, m, axis=0)
+                clear = _nearest(X, others[np.isfinite(others).all(axis=1)])
                 if moving is None:
                     moving = self._moving(X, self._t_frame)
                 anchor = np.where((ds <= body.reach + body.tol) & (clear >= cfg.wrist_clear_m) & moving
