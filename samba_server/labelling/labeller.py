@@ -987,8 +987,7 @@ class Labeller:
         doubt = np.where((pts.n_views[free] < 3) & (pts.unexplained[free] > 0), cfg.unexplained_m, 0.0)
         cost = np.full((len(free), len(lost)), np.inf)
         right = None if self._facing is None else right_of(self._facing)
-        moving = None
-        only_wrists = set(lost.tolist()) <= {LW, RW}
+        wrist_anchor = self._wrist_anchors(pts, X, free, doubt, assign, named, lost)
         for j, m in enumerate(lost):
             if np.isfinite(pred[m]).all():
                 d = np.linalg.norm(X - pred[m], axis=1)
@@ -1002,32 +1001,8 @@ class Labeller:
                 if assign[other] >= 0:
                     d = np.linalg.norm(X - (named[other] + sign * body.shoulder_width * right), axis=1)
                     anchor = np.where(d <= 3 * body.tol, d, np.inf)
-            if m in (LW, RW) and only_wrists:
-                # the one marker unnamed, a wrist (or the two wrists, the rest named: the
-                # assignment and its margin settle which is which; a standing subject's hands,
-                # both hidden for 0.1 s after a blackout, were found by no prediction and left
-                # unnamed to the take's end, 002_03 seed 655): anywhere within its arm's reach, if nearer
-                # its own shoulder than the other one (else at a cost), clear of the named
-                # markers (a point hugging one is more likely its ghost), not a static
-                # reflection, not a doubtful 2-view point whose every blob a named marker uses
-                # too (a ghost where two merged blobs' rays cross), and not a point whose every
-                # blob a named shoulder uses, doubtful or not (the rays of a right shoulder's
-                # merged blobs crossed 15.6 cm from it where no view missed them, and a
-                # dribbler's lost left wrist was named there 35 cm off, 002_09 seed 629; any
-                # named marker's: hands together on a hilt make such points of each other's
-                # blobs, and swordplay lost 1.7 points): a wrist lost where its prediction went
-                # wrong (hands together on a sword hilt) is found again
-                own, other = (LS, RS) if m == LW else (RS, LS)
-                ds = np.linalg.norm(X - named[own], axis=1)
-                do = np.linalg.norm(X - named[other], axis=1)
-                others = np.delete(named, m, axis=0)
-                clear = _nearest(X, others[np.isfinite(others).all(axis=1)])
-                if moving is None:
-                    moving = self._moving(X, self._t_frame)
-                anchor = np.where((ds <= body.reach + body.tol) & (clear >= cfg.wrist_clear_m) & moving
-                                  & ((doubt == 0) | ~_borrowed(pts, free, assign[assign >= 0]))
-                                  & ~_borrowed(pts, free, assign[[LS, RS]][assign[[LS, RS]] >= 0]),
-                                  cfg.wrist_side_w * np.maximum(0.0, ds - do), np.inf)
+            if m in wrist_anchor:
+                anchor = wrist_anchor[m]
             for knee, ankle in ((LK, LA), (RK, RA)):
                 if m == ankle and assign[knee] >= 0:
                     e = np.abs(np.linalg.norm(X - named[knee], axis=1) - body.shin)
@@ -1074,6 +1049,57 @@ class Labeller:
                 continue
             named[m] = pts.X[p]
             _name_points(assign, arow, row_pt, (m,), (p,))
+
+    def _wrist_anchors(self, pts: Points3D, X: np.ndarray, free: np.ndarray, doubt: np.ndarray,
+                       assign: np.ndarray, named: np.ndarray, lost: np.ndarray) -> dict[int, np.ndarray]:
+        """For :meth:`_recover`: per lost wrist, the cost (m; inf = no candidate) of naming it on
+        each free point X (F, 3) (indices free (F,) into pts, ``doubt`` (F,) their ghost cost)
+        by its arm alone, when the wrists are the only markers unnamed (assign (8,), named (8, 3)
+        m with NaN rows unnamed, lost the unnamed markers); else none.
+
+        A lost wrist is anywhere within its arm's reach, if nearer its own shoulder than the
+        other one (else at ``wrist_side_w`` per metre), clear of the named markers (a point
+        hugging one is more likely its ghost), not a static reflection, not a doubtful 2-view
+        point whose every blob a named marker uses too (a ghost where two merged blobs' rays
+        cross), and not a point whose every blob a named shoulder uses, doubtful or not (the
+        rays of a right shoulder's merged blobs crossed 15.6 cm from it where no view missed
+        them, and a dribbler's lost left wrist was named there 35 cm off, 002_09 seed 629; any
+        named marker's: hands together on a hilt make such points of each other's blobs, and
+        swordplay lost 1.7 points): a wrist lost where its prediction went wrong (hands
+        together on a sword hilt) is found again.
+
+        Both wrists lost, the rest named: the assignment and its margin settle which is which
+        (a standing subject's hands, both hidden for 0.1 s after a blackout, were found by no
+        prediction and left unnamed to the take's end, 002_03 seed 655), but only with two
+        candidate points: one point may be both hands together, and the wrist whose shoulder
+        is nearer is no better than a coin (a dribbler's hands on the ball, 002_08 seeds 3 and
+        653), and each no farther from where it was last named than ``gate_m`` +
+        ``recover_speed`` times the time since (two ghosts 40 cm behind a standard pose's hands,
+        a reflection's rays crossing their blobs the frame they were hidden, took both)."""
+        cfg, body = self.config, self._body
+        wrists = [m for m in lost.tolist() if m in (LW, RW)]
+        if len(wrists) != len(lost) or not len(X):
+            return {}
+        moving = self._moving(X, self._t_frame)
+        out = {}
+        for m in wrists:
+            own, other = (LS, RS) if m == LW else (RS, LS)
+            ds = np.linalg.norm(X - named[own], axis=1)
+            do = np.linalg.norm(X - named[other], axis=1)
+            others = np.delete(named, m, axis=0)
+            clear = _nearest(X, others[np.isfinite(others).all(axis=1)])
+            out[m] = np.where((ds <= body.reach + body.tol) & (clear >= cfg.wrist_clear_m) & moving
+                              & ((doubt == 0) | ~_borrowed(pts, free, assign[assign >= 0]))
+                              & ~_borrowed(pts, free, assign[[LS, RS]][assign[[LS, RS]] >= 0]),
+                              cfg.wrist_side_w * np.maximum(0.0, ds - do), np.inf)
+        if len(out) == 2:
+            if np.count_nonzero(np.isfinite(out[LW]) | np.isfinite(out[RW])) < 2:
+                return {}
+            for m in out:  # and no farther than it can have gone since it was last named
+                if np.isfinite(self._pos[m]).all():
+                    went = cfg.gate_m + cfg.recover_speed * (self._t_frame - self._seen[m])
+                    out[m] = np.where(np.linalg.norm(X - self._pos[m], axis=1) <= went, out[m], np.inf)
+        return out
 
     def _recover_leg(self, pts: Points3D, pred: np.ndarray, assign: np.ndarray, arow: np.ndarray,
                      row_pt: np.ndarray) -> None:

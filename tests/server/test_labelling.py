@@ -2408,6 +2408,32 @@ def test_a_wrist_whose_skeleton_went_wrong_is_found_again_as_the_one_marker_unna
         assert not np.isfinite(named[61:, RW]).any()
 
 
+@pytest.mark.parametrize("rule", [True, False])
+def test_two_wrists_whose_skeleton_went_wrong_are_found_again_each_at_its_own_shoulder(rule):
+    """Both hands hidden from a camera and the solver, with no marker on either arm, swinging
+    both 0.9 m away (a standing subject's hands after a blackout, 002_03 seed 655): neither
+    prediction finds them. They are the only markers unnamed, each free point within an arm's
+    reach and nearer one shoulder than the other: both named again at once, each at its own
+    shoulder, never the other way round; without the rule they stay unnamed to the end."""
+    from samba_common.skeleton import J
+
+    rig = _three_cameras()
+    joints, _t = synthetic_motion(2.0, FPS)
+    truth = joints[:, list(MARKER_JOINT)]
+    lab = Labeller(rig, config=LabelConfig(wrist_clear_m=0.15 if rule else np.inf))
+    lab.set_lengths(DEFAULT_LENGTHS)
+    swing = np.array([0.0, 0.5, 0.7])
+    named = _with_wrong_skeleton(lab, rig, joints, [LW, RW], [0], {J["left_wrist"]: swing, J["right_wrist"]: swing},
+                                 np.random.default_rng(14))
+    right = _right(named, truth)
+    assert right[:60].all()
+    assert not (np.isfinite(named).all(axis=2) & ~right).any()  # never a wrong name
+    if rule:
+        assert right[61:64, [LW, RW]].all() and right[61:, [LW, RW]].mean() >= 0.95
+    else:
+        assert not np.isfinite(named[61:, [LW, RW]]).any()
+
+
 @pytest.mark.parametrize("speed", [6.0, np.inf])
 def test_a_hand_lost_for_a_frame_is_not_named_where_it_cannot_have_gone(speed):
     """A shoulder and the other hand missing for a frame while two points seen by every camera
