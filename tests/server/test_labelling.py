@@ -2384,37 +2384,16 @@ def test_a_leg_the_skeleton_lifts_is_found_again_as_the_one_pair_that_fits(pair,
 
 
 @pytest.mark.parametrize("rule", [True, False])
-def test_a_wrist_whose_skeleton_went_wrong_is_found_again_as_the_one_marker_unnamed(rule):
+@pytest.mark.parametrize("wrists", [(RW,), (LW, RW)], ids=["one", "both"])
+def test_wrists_whose_skeleton_went_wrong_are_found_again_as_the_only_markers_unnamed(wrists, rule):
     """Hands together on a sword hilt part with a wrist's track lost and the solver, with no
     marker on that arm, swinging it 0.9 m away: its prediction is beyond every gate. It is the
     one marker unnamed and the one moving point within its arm's reach, clear of the named
-    markers: named again at once (seen by two of three cameras, so a possible ghost); without
-    the rule (``wrist_clear_m`` = inf) it stays unnamed."""
-    from samba_common.skeleton import J
-
-    rig = _three_cameras()
-    joints, _t = synthetic_motion(2.0, FPS)
-    truth = joints[:, list(MARKER_JOINT)]
-    lab = Labeller(rig, config=LabelConfig(wrist_clear_m=0.15 if rule else np.inf))
-    lab.set_lengths(DEFAULT_LENGTHS)
-    named = _with_wrong_skeleton(lab, rig, joints, [RW], [0], {J["right_wrist"]: np.array([0.0, 0.5, 0.7])},
-                                 np.random.default_rng(13))
-    right = _right(named, truth)
-    assert right[:60].all()
-    assert not (np.isfinite(named).all(axis=2) & ~right).any()  # never a wrong name
-    if rule:  # (a frame whose 2-view point for it is lost in the noise may miss it)
-        assert right[61:64].all() and right[61:, RW].mean() >= 0.95
-    else:
-        assert not np.isfinite(named[61:, RW]).any()
-
-
-@pytest.mark.parametrize("rule", [True, False])
-def test_two_wrists_whose_skeleton_went_wrong_are_found_again_each_at_its_own_shoulder(rule):
-    """Both hands hidden from a camera and the solver, with no marker on either arm, swinging
-    both 0.9 m away (a standing subject's hands after a blackout, 002_03 seed 655): neither
-    prediction finds them. They are the only markers unnamed, each free point within an arm's
-    reach and nearer one shoulder than the other: both named again at once, each at its own
-    shoulder, never the other way round; without the rule they stay unnamed to the end."""
+    markers: named again at once (seen by two of three cameras, so a possible ghost). Both
+    hands hidden so (a standing subject's hands after a blackout, 002_03 seed 655): each of
+    the two free points is nearer one shoulder than the other, and each wrist is named at its
+    own, never the other way round. Without the rule (``wrist_clear_m`` = inf) they stay
+    unnamed."""
     from samba_common.skeleton import J
 
     rig = _three_cameras()
@@ -2423,15 +2402,17 @@ def test_two_wrists_whose_skeleton_went_wrong_are_found_again_each_at_its_own_sh
     lab = Labeller(rig, config=LabelConfig(wrist_clear_m=0.15 if rule else np.inf))
     lab.set_lengths(DEFAULT_LENGTHS)
     swing = np.array([0.0, 0.5, 0.7])
-    named = _with_wrong_skeleton(lab, rig, joints, [LW, RW], [0], {J["left_wrist"]: swing, J["right_wrist"]: swing},
-                                 np.random.default_rng(14))
+    joint = {LW: J["left_wrist"], RW: J["right_wrist"]}
+    named = _with_wrong_skeleton(lab, rig, joints, list(wrists), [0], {joint[m]: swing for m in wrists},
+                                 np.random.default_rng(11 + 2 * len(wrists)))
     right = _right(named, truth)
+    w = list(wrists)
     assert right[:60].all()
     assert not (np.isfinite(named).all(axis=2) & ~right).any()  # never a wrong name
-    if rule:
-        assert right[61:64, [LW, RW]].all() and right[61:, [LW, RW]].mean() >= 0.95
+    if rule:  # (a frame whose 2-view point for it is lost in the noise may miss it)
+        assert right[61:64][:, w].all() and right[61:, w].mean() >= 0.95
     else:
-        assert not np.isfinite(named[61:, [LW, RW]]).any()
+        assert not np.isfinite(named[61:, w]).any()
 
 
 @pytest.mark.parametrize("speed", [6.0, np.inf])
