@@ -1080,7 +1080,10 @@ class Labeller:
         wrists = [m for m in lost.tolist() if m in (LW, RW)]
         if len(wrists) != len(lost) or not len(X):
             return {}
-        moving = self._moving(X, self._t_frame)
+        # what does not depend on which wrist: moving, no ghost of named markers' blobs
+        allowed = (self._moving(X, self._t_frame)
+                   & ((doubt == 0) | ~_borrowed(pts, free, assign[assign >= 0]))
+                   & ~_borrowed(pts, free, assign[[LS, RS]][assign[[LS, RS]] >= 0]))
         out = {}
         for m in wrists:
             own, other = (LS, RS) if m == LW else (RS, LS)
@@ -1088,9 +1091,7 @@ class Labeller:
             do = np.linalg.norm(X - named[other], axis=1)
             others = np.delete(named, m, axis=0)
             clear = _nearest(X, others[np.isfinite(others).all(axis=1)])
-            out[m] = np.where((ds <= body.reach + body.tol) & (clear >= cfg.wrist_clear_m) & moving
-                              & ((doubt == 0) | ~_borrowed(pts, free, assign[assign >= 0]))
-                              & ~_borrowed(pts, free, assign[[LS, RS]][assign[[LS, RS]] >= 0]),
+            out[m] = np.where(allowed & (ds <= body.reach + body.tol) & (clear >= cfg.wrist_clear_m),
                               cfg.wrist_side_w * np.maximum(0.0, ds - do), np.inf)
         if len(out) == 2:
             if np.count_nonzero(np.isfinite(out[LW]) | np.isfinite(out[RW])) < 2:
